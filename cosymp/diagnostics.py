@@ -1,0 +1,109 @@
+"""Diagnostics (PHYSICS.md section 4): the paper's estimators, as printed, and rigorous companions.
+
+Paper's estimators (labelled as such wherever shown): omega(X1, X2) and det[X1 X2 X3] of the
+one-step increments X = z_(k+1) - z_k of nearby trajectories. Rigorous companions: the one-step
+tangent map M_k on the time slice with |det M_k - 1| and ||M_k^T J M_k - J||_max, omega of the
+separation vectors of nearby trajectories, and the action (area) of a carried loop.
+"""
+import numpy as np
+
+from .errors import RunError
+from .integrate import failure_message
+from .kernels.families import OK
+from .kernels.loops import tangent
+
+
+def J(n):
+    """The canonical matrix in z = (q, p)."""
+    return np.block([[np.zeros((n, n)), np.eye(n)], [-np.eye(n), np.zeros((n, n))]])
+
+
+def omega(X, Y):
+    """Canonical 2-form sum_i X_qi Y_pi - X_pi Y_qi over the last axis (q then p)."""
+    n = X.shape[-1] // 2
+    return np.sum(X[..., :n] * Y[..., n:] - X[..., n:] * Y[..., :n], axis=-1)
+
+
+def tangent_maps(traj, member=0, last=False):
+    """One-step tangent maps M_k at the recorded states of one member: (K - 1, 2n, 2n).
+
+    M_k is the Jacobian of the step taken from record k (exact for linear scenes, complex step
+    otherwise). `last` adds the map of one more step from the final record.
+    """
+    s = traj.setup
+    z = np.ascontiguousarray(traj.z[:, member])
+    pt = np.ascontiguousarray(traj.pt[:, member])
+    t = np.ascontiguousarray(traj.t)
+    if not last:
+        z, pt, t = z[:-1], pt[:-1], t[:-1]
+    M = np.empty((len(t), z.shape[1], z.shape[1]))
+    status, k = tangent(s.data, s.P, float(traj.h), t, z, pt, M)
+    if status != OK:
+        msg = failure_message(status, k * traj.stride, t[k], traj.h)
+        raise RunError(f"tangent map: {msg}", t[k], k * traj.stride)
+    return M
+
+
+def det_deviation(M):
+    """|det M - 1| per map."""
+    return np.abs(np.linalg.det(M) - 1.0)
+
+
+def symplecticity_defect(M):
+    """||M^T J M - J||_max per map."""
+    Jn = J(M.shape[-1] // 2)
+    return np.max(np.abs(np.einsum("kji,jl,klm->kim", M, Jn, M) - Jn), axis=(1, 2))
+
+
+def nearby_states(z0, delta, count):
+    """z0 and `count` perturbations of size delta: along each coordinate, then -delta * sum."""
+    z0 = np.asarray(z0, float)
+    m = z0.size
+    dirs = [np.eye(m)[i % m] * (1 if i < m else -1) for i in range(count)]
+    if count > m:
+        dirs[m] = -np.ones(m) / np.sqrt(m)
+    return np.array([z0] + [z0 + delta * d for d in dirs])
+
+
+def paper_symplectic_form(traj, i=1, j=2):
+    """The paper's estimator: omega(X^i, X^j) of the one-step increments of members i and j."""
+    dZ = traj.increments
+    return omega(dZ[1:, i], dZ[1:, j])
+
+
+def paper_volume_form(traj, members=None):
+    """The paper's estimator: det[X^1 ... X^(2n+1)] of increments in (q, t, p) of nearby members."""
+    dZ = traj.increments[1:]
+    n = traj.q.shape[-1]
+    members = list(range(1, 2 * n + 2)) if members is None else list(members)
+    X = dZ[:, members]
+    dt = np.full(X.shape[:2] + (1,), traj.h)
+    cols = np.concatenate([X[..., :n], dt, X[..., n:]], axis=-1)
+    return np.linalg.det(np.swapaxes(cols, 1, 2))
+
+
+def separation_omega(traj, i=1, j=2):
+    """omega(delta^i, delta^j) of separations from member 0: constant for a symplectic map."""
+    z = traj.z
+    return omega(z[:, i] - z[:, 0], z[:, j] - z[:, 0])
+
+
+def ring_states(z0, radius, count):
+    """A closed loop of initial states: a circle in the (q_1, p_1) plane around z0."""
+    z0 = np.asarray(z0, float)
+    n = z0.size // 2
+    a = 2 * np.pi * np.arange(count) / count
+    Z = np.repeat(z0[None], count, axis=0)
+    Z[:, 0] += radius * np.cos(a)
+    Z[:, n] += radius * np.sin(a)
+    return Z
+
+
+def loop_action(traj):
+    """-sum_i closed-integral p_i dq_i of the carried loop (trapezoid rule, members in order):
+    the enclosed area of a counter-clockwise loop in one degree of freedom; invariant under
+    symplectic maps (exactly so for linear ones, whose image of a polygon is a polygon)."""
+    q, p = traj.q, traj.p
+    dq = np.roll(q, -1, axis=1) - q
+    pm = 0.5 * (np.roll(p, -1, axis=1) + p)
+    return -np.sum(pm * dq, axis=(1, 2))

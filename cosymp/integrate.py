@@ -1,0 +1,170 @@
+"""Runs: checked input, one compiled loop per run or ensemble, results with p_t and H + p_t."""
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import InputError, RunError
+from .kernels.families import NEWTON, OK, OVERFLOW, SINGULAR
+from .kernels.loops import energies, propagate
+from .methods import method as get_method
+from .scenes import SCENES
+
+MAX_STEPS = 100_000_000
+MAX_RECORDED = 20_000_000
+
+
+def get_scene(name):
+    if name not in SCENES:
+        raise InputError(f"unknown scene '{name}': choose one of {', '.join(SCENES)}")
+    return SCENES[name]
+
+
+def check_step(h, T):
+    """Number of steps for step h up to horizon T, or InputError saying what to change."""
+    for label, x in (("h", h), ("T", T)):
+        if not isinstance(x, (int, float)) or not math.isfinite(x):
+            raise InputError(f"{label} = {x} is not a finite number: pass a finite {label}")
+    if h <= 0:
+        raise InputError(f"h = {h} must be positive: pass a step size h > 0")
+    if T <= 0:
+        raise InputError(f"T = {T} must be positive: pass a horizon T > 0")
+    steps = math.ceil(T / h - 1e-9)
+    if steps > MAX_STEPS:
+        raise InputError(f"T/h = {T / h:.3g} steps exceeds the cap of {MAX_STEPS:.0e}: "
+                         f"increase h or shorten T")
+    return max(steps, 1)
+
+
+@dataclass
+class Setup:
+    """A checked (scene, method, parameters) triple, ready to run."""
+
+    scene: object
+    method: object
+    theta: float
+    values: dict
+    P: tuple
+    data: tuple
+
+    @classmethod
+    def make(cls, scene, method, values=None, theta=None):
+        scene = get_scene(scene) if isinstance(scene, str) else scene
+        method = get_method(method) if isinstance(method, str) else method
+        reason = method.refusal(scene)
+        if reason:
+            raise InputError(reason)
+        data = method.data(theta)
+        vals = scene.values(values)
+        theta = (0.5 if theta is None else float(theta)) if method.takes_theta else None
+        return cls(scene, method, theta, vals, scene.pack(vals), data)
+
+    def with_values(self, **changes):
+        return Setup.make(self.scene, self.method, {**self.values, **changes}, self.theta)
+
+
+@dataclass
+class Trajectory:
+    """Recorded states of N trajectories: t (K,), q and p (K, N, n), pt and H (K, N).
+
+    H_ext = H + p_t is the extended Hamiltonian (0 at the start by the convention
+    p_t(0) = -H(z0, 0)). `steps` were completed with step h; record j is step j*stride.
+    `failure` holds the message of a run that stopped early (overflow, Newton).
+    """
+
+    setup: Setup
+    h: float
+    stride: int
+    t: np.ndarray
+    q: np.ndarray
+    p: np.ndarray
+    pt: np.ndarray
+    H: np.ndarray
+    steps: int
+    wall_s: float
+    increments: np.ndarray = None
+    failure: str = ""
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def H_ext(self):
+        return self.H + self.pt
+
+    @property
+    def z(self):
+        return np.concatenate([self.q, self.p], axis=-1)
+
+    @property
+    def t_final(self):
+        return self.t[-1]
+
+
+def initial_states(setup, z0=None):
+    """(N, 2n) initial states: z0 rows if given, else the scene's initial condition."""
+    if z0 is None:
+        q0, p0 = setup.scene.initial(setup.values)
+        return np.concatenate([q0, p0])[None, :]
+    z0 = np.array(z0, dtype=float, ndmin=2)
+    if z0.shape[1] != 2 * setup.scene.ndof or not np.all(np.isfinite(z0)):
+        raise InputError(f"initial states must be finite rows of length {2 * setup.scene.ndof}")
+    return np.ascontiguousarray(z0)
+
+
+def simulate(setup, h, T, z0=None, stride=None, increments=False, t0=0.0, pt0=None):
+    """Run setup's method from t0 for T (rounded up to whole steps of h) on N initial states.
+
+    z0: (N, 2n) states (default: the scene's initial condition); pt0 defaults to -H(z0, t0).
+    stride: record every stride-th step (default: every step while the records fit in
+    MAX_RECORDED values, else the smallest stride that fits).
+    """
+    steps = check_step(h, T)
+    Z = initial_states(setup, z0)
+    N, m = Z.shape
+    per_record = N * (m + 1) * (3 if increments else 1)
+    if stride is None:
+        stride = max(1, math.ceil(steps * per_record / MAX_RECORDED))
+    elif not isinstance(stride, (int, np.integer)) or stride < 1:
+        raise InputError(f"stride = {stride} must be a positive whole number")
+    K = steps // stride + 1
+    if K * per_record > MAX_RECORDED:
+        raise InputError(f"recording {K} states of {N} trajectories exceeds the memory cap "
+                         f"({MAX_RECORDED:.0e} values): pass a larger stride")
+    PT = np.empty(N)
+    H0 = np.empty((1, N))
+    energies(setup.P, np.array([float(t0)]), Z[None], H0)
+    PT[:] = -H0[0] if pt0 is None else pt0
+    Trec = np.empty(K)
+    Zrec = np.empty((K, N, m))
+    PTrec = np.empty((K, N))
+    dZrec = np.empty((K if increments else 0, N, m))
+    start = time.perf_counter()
+    status, done = propagate(setup.data, setup.P, float(t0), float(h), Z, PT, steps, stride,
+                             Trec, Zrec, PTrec, dZrec)
+    wall = time.perf_counter() - start
+    kept = done // stride + 1
+    traj = _trajectory(setup, h, stride, Trec[:kept], Zrec[:kept], PTrec[:kept],
+                       dZrec[:kept] if increments else None, done, wall)
+    if status != OK:
+        t_fail = t0 + done * h
+        traj.failure = failure_message(status, done, t_fail, h)
+        raise RunError(traj.failure, t_fail, done, traj)
+    return traj
+
+
+def _trajectory(setup, h, stride, T, Z, PT, dZ, steps, wall):
+    n = setup.scene.ndof
+    H = np.empty(PT.shape)
+    energies(setup.P, T, Z, H)
+    return Trajectory(setup, h, stride, T, Z[..., :n], Z[..., n:], PT, H, steps, wall, dZ)
+
+
+def failure_message(status, step, t, h):
+    where = f"in step {step + 1} (from t = {t:.6g})"
+    if status == OVERFLOW:
+        return f"overflow {where}: the state is no longer finite; reduce h or shorten T"
+    if status == NEWTON:
+        return f"Newton did not converge {where}: reduce h"
+    if status == SINGULAR:
+        return f"singular Newton matrix {where}: reduce h"
+    return f"run failed {where}"

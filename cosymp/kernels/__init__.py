@@ -1,0 +1,1 @@
+"""Numba kernels: generic loops specialized at compile time per scene and method family."""

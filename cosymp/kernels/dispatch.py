@@ -1,0 +1,122 @@
+"""Compile-time dispatch from a parameter tuple to the jitted functions behind it.
+
+Time coefficients live in a 2-D table C (one row per time point of a step) and are passed as
+(C, j) rather than as a row view: a view or a tuple of arrays unpacked inside a loop with early
+exits costs reference-count operations on every step, which numba cannot prune there.
+
+A scene's kernel parameters are an instance of its own namedtuple class, and so is a method
+family's data. Numba types each class as a distinct type, so one generic kernel compiled with
+``cache=True`` specializes per (scene, family) and its cache entry survives a new process: no
+function object ever appears in a cached signature (STYLE.md, "Numba caching").
+
+Each stub below is resolved by the class of its first argument, through the registries
+``cosymp.scenes.KERNELS`` and ``cosymp.kernels.registry.FAMILIES``.
+"""
+import inspect
+
+from numba.core.errors import TypingError
+from numba.extending import overload
+
+JIT = {"cache": True, "fastmath": {"contract"}, "error_model": "numpy"}
+# Everything a step calls is inlined by LLVM (alwaysinline): left as calls, a Hessian or a
+# small solve costs more than the arithmetic of the step.
+INLINE = {**JIT, "forceinline": True}
+# Functions that declare stack scratch are inlined in numba's IR instead, so that the stack
+# arrays belong to the compiled loop that uses them (kernels.stack).
+SCRATCH = {**JIT, "inline": "always"}
+# Overload bodies are closures that compile into their caller's cached library; caching them on
+# their own would key distinct closures by one qualified name.
+_INLINE = {k: v for k, v in INLINE.items() if k != "cache"}
+_SCRATCH = {k: v for k, v in JIT.items() if k != "cache"}
+
+
+def _target(cls, name):
+    from ..scenes import KERNELS
+    from .registry import FAMILIES
+
+    table = KERNELS.get(cls) or FAMILIES.get(cls)
+    fn = getattr(table, name, None)
+    if fn is None:
+        raise TypingError(f"{cls.__name__} provides no '{name}'")
+    return fn
+
+
+def _forwarder(fn, arity):
+    if arity == 1:
+        def impl(k):
+            return fn(k)
+    elif arity == 2:
+        def impl(k, a):
+            return fn(k, a)
+    elif arity == 3:
+        def impl(k, a, b):
+            return fn(k, a, b)
+    elif arity == 4:
+        def impl(k, a, b, c):
+            return fn(k, a, b, c)
+    elif arity == 5:
+        def impl(k, a, b, c, d):
+            return fn(k, a, b, c, d)
+    else:
+        def impl(k, a, b, c, d, e, f, g):
+            return fn(k, a, b, c, d, e, f, g)
+    return impl
+
+
+def _dispatched(name, arity, doc, scratch=False):
+    """A stub whose call in jitted code becomes a call of the registered implementation."""
+    params = ("k", "a", "b", "c", "d", "e", "f", "g")[:arity]
+
+    def stub(*args):
+        raise NotImplementedError(f"{name} is only callable from jitted code")
+
+    stub.__name__ = stub.__qualname__ = name
+    stub.__doc__ = f"{doc} (arguments: {', '.join(params)})."
+    stub.__signature__ = inspect.Signature(
+        [inspect.Parameter(p, inspect.Parameter.POSITIONAL_OR_KEYWORD) for p in params])
+
+    def _overload(*types):
+        return _forwarder(_target(types[0].instance_class, name), arity)
+
+    _overload.__signature__ = stub.__signature__
+    if scratch:
+        overload(stub, jit_options=_SCRATCH, inline="always")(_overload)
+    else:
+        overload(stub, jit_options=_INLINE)(_overload)
+    return stub
+
+
+def _constant(name, doc):
+    """A stub that compiles to a constant attribute of the registered scene."""
+    def stub(k):
+        raise NotImplementedError(f"{name} is only callable from jitted code")
+
+    stub.__name__ = stub.__qualname__ = name
+    stub.__doc__ = doc
+
+    @overload(stub, jit_options=_INLINE)
+    def _overload(k):
+        value = _target(k.instance_class, name)
+        return lambda k: value
+
+    return stub
+
+
+coef = _dispatched("coef", 4, "Fill row j of C with the time coefficients at t: coef(P, t, C, j)")
+energy = _dispatched("energy", 4, "H(z) from coefficient row j: energy(P, C, j, z)")
+grad = _dispatched("grad", 5, "Gradient of H in z = (q, p): grad(P, C, j, z, g)")
+hess = _dispatched("hess", 5, "Hessian of H in z: hess(P, C, j, z, Hm)")
+dhdt = _dispatched("dhdt", 4, "Partial derivative of H in t: dhdt(P, C, j, z)")
+flow = _dispatched("flow", 4, "Exact flow from t0 to t1, in place: flow(P, t0, t1, z)")
+vecpot = _dispatched("vecpot", 5, "Vector potential of the run's gauge at q = z[:2]: vecpot(P, C, j, z, A)")
+efield = _dispatched("efield", 5, "Electric field at q = z[:2]: efield(P, C, j, z, E)")
+bfield = _dispatched("bfield", 3, "Magnetic field (z component): bfield(P, C, j)")
+step = _dispatched("step", 8, "One step of family D for one member: step(D, P, C, t, h, z, pt, W) -> (status, pt)")
+work = _dispatched("work", 3, "Stack work arrays of family D: work(D, P, like)", scratch=True)
+lmatrix = _dispatched("lmatrix", 8, "Step matrices of family D on a linear scene: "
+                      "lmatrix(D, P, C, t, h, M, Q, W) -> s")
+lwork = _dispatched("lwork", 2, "Stack work arrays of family D's step matrices: lwork(D, P)",
+                    scratch=True)
+ndof = _constant("ndof", "Degrees of freedom n of the scene (z has 2n entries).")
+ncoef = _constant("ncoef", "Length of the scene's time-coefficient vector.")
+is_linear = _constant("linear", "Whether H is quadratic in z, so implicit steps are one linear solve.")

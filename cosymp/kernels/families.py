@@ -1,0 +1,276 @@
+"""Method families: each is a data tuple (what a method is) plus one member-step function.
+
+A step advances one trajectory of the extended state (q, t, p, p_t) by h, given the scene's
+time coefficients at the family's time offsets (row j of C at t + offsets[j] h, shared by every
+member of an ensemble). z = (q, p) is updated in place; the new p_t is returned with a status.
+Family data are tuples, so their sizes are known when a kernel compiles (stack scratch, loops
+unrolled). Linear scenes use the same families as matrices (kernels.linear).
+"""
+from collections import namedtuple
+
+import numpy as np
+from numba import njit
+
+from .dispatch import INLINE, SCRATCH, bfield, dhdt, efield, energy, flow, grad, hess, is_linear, ndof, vecpot
+from .linalg import solve
+from .stack import matrices, stage_flat, stage_square, stage_vectors, vectors
+
+OK, OVERFLOW, NEWTON, SINGULAR = 0, 1, 2, 3
+NEWTON_MAX = 50
+NEWTON_TOL = 4e-15
+
+Explicit = namedtuple("Explicit", "A b stage offsets")
+Explicit.__doc__ = ("Explicit Runge-Kutta tableau (A row-major, flattened); stage i is evaluated at "
+                    "offsets[stage[i]].")
+Theta = namedtuple("Theta", "wq0 wq1 wp0 wp1 offsets")
+Theta.__doc__ = ("Theta step: H evaluated at q = wq0 q_k + wq1 q_k+1, p = wp0 p_k + wp1 p_k+1, "
+                 "t = t_k + offsets[0] h.")
+Gauss = namedtuple("Gauss", "A b offsets")
+Gauss.__doc__ = "Implicit (collocation) Runge-Kutta tableau (A flattened), nodes = offsets."
+Composition = namedtuple("Composition", "gammas offsets")
+Composition.__doc__ = "Midpoint sub-steps of sizes gammas[i] h, sub-step i centred at offsets[i]."
+Boris = namedtuple("Boris", "offsets")
+Boris.__doc__ = "Boris push (drift-kick-drift), offsets (0, 1/2, 1)."
+Exact = namedtuple("Exact", "offsets")
+Exact.__doc__ = "The scene's exact flow, offsets (0, 1)."
+
+
+@njit(**INLINE)
+def _newton_done(dz, ndz, z, nz, prev):
+    """Converged to round-off: a small correction, or one that stopped shrinking near the floor."""
+    size = 1.0
+    for i in range(nz):
+        size = max(size, abs(z[i]))
+    corr = 0.0
+    for i in range(ndz):
+        corr = max(corr, abs(dz[i]))
+    return corr <= NEWTON_TOL * size or (corr <= 1e-10 * size and corr >= 0.5 * prev), corr
+
+
+@njit(**INLINE)
+def theta_core(P, C, j, h, wq0, wq1, wp0, wp1, z, pt, V, Hm, Jm):
+    """Solve q1 - q = h H_p(Z), p1 - p = -h H_q(Z) with Z the weighted point, by Newton."""
+    n = ndof(P)
+    m = 2 * n
+    z1, Zt, g, F = V[0], V[1], V[2], V[3]
+    for i in range(m):
+        z1[i] = z[i]
+    prev = np.inf
+    status = NEWTON
+    for it in range(NEWTON_MAX):
+        for i in range(n):
+            Zt[i] = wq0 * z[i] + wq1 * z1[i]
+            Zt[n + i] = wp0 * z[n + i] + wp1 * z1[n + i]
+        grad(P, C, j, Zt, g)
+        hess(P, C, j, Zt, Hm)
+        for i in range(n):
+            F[i] = z[i] - z1[i] + h * g[n + i]
+            F[n + i] = z[n + i] - z1[n + i] - h * g[i]
+        for i in range(n):
+            for c in range(m):
+                w = wq1 if c < n else wp1
+                Jm[i, c] = -h * w * Hm[n + i, c]
+                Jm[n + i, c] = h * w * Hm[i, c]
+        for i in range(m):
+            Jm[i, i] += 1.0
+        if not solve(Jm, F, m, 1):
+            status = SINGULAR
+            break
+        for i in range(m):
+            z1[i] += F[i]
+        done, prev = _newton_done(F, m, z1, m, prev)
+        if done or is_linear(P):
+            status = OK
+            break
+    if status == OK:
+        for i in range(n):
+            Zt[i] = wq0 * z[i] + wq1 * z1[i]
+            Zt[n + i] = wp0 * z[n + i] + wp1 * z1[n + i]
+        pt = pt - h * dhdt(P, C, j, Zt)
+        for i in range(m):
+            z[i] = z1[i]
+    return status, pt
+
+
+@njit(**SCRATCH)
+def theta_work(D, P, z):
+    return vectors(P, 4, z), matrices(P, 2, z)
+
+
+@njit(**INLINE)
+def theta_step(D, P, C, t, h, z, pt, W):
+    V, MM = W
+    return theta_core(P, C, 0, h, D.wq0, D.wq1, D.wp0, D.wp1, z, pt, V, MM[0], MM[1])
+
+
+@njit(**INLINE)
+def composition_step(D, P, C, t, h, z, pt, W):
+    V, MM = W
+    status = OK
+    for i in range(len(D.gammas)):
+        status, pt = theta_core(P, C, i, D.gammas[i] * h, 0.5, 0.5, 0.5, 0.5, z, pt, V, MM[0], MM[1])
+        if status != OK:
+            break
+    return status, pt
+
+
+@njit(**SCRATCH)
+def explicit_work(D, P, z):
+    return stage_vectors(D, P, z), vectors(P, 2, z)
+
+
+@njit(**INLINE)
+def explicit_step(D, P, C, t, h, z, pt, W):
+    K, V = W
+    Y, g = V[0], V[1]
+    n = ndof(P)
+    m = 2 * n
+    s = len(D.b)
+    dpt = 0.0 * pt
+    for i in range(s):
+        for r in range(m):
+            Y[r] = z[r]
+        for j in range(i):
+            a = h * D.A[i * s + j]
+            if a != 0.0:
+                for r in range(m):
+                    Y[r] += a * K[j, r]
+        grad(P, C, D.stage[i], Y, g)
+        for r in range(n):
+            K[i, r] = g[n + r]
+            K[i, n + r] = -g[r]
+        dpt += D.b[i] * dhdt(P, C, D.stage[i], Y)
+    for i in range(s):
+        bh = h * D.b[i]
+        for r in range(m):
+            z[r] += bh * K[i, r]
+    return OK, pt - h * dpt
+
+
+@njit(**SCRATCH)
+def gauss_work(D, P, z):
+    return (stage_vectors(D, P, z), stage_vectors(D, P, z), vectors(P, 2, z), stage_flat(D, P, z),
+            matrices(P, 1, z)[0], stage_square(D, P, z))
+
+
+@njit(**INLINE)
+def gauss_step(D, P, C, t, h, z, pt, W):
+    """Collocation: stage values Z_i = z + h sum_j A_ij f(Z_j, t + c_j h), solved by Newton."""
+    Zs, Fs, V, F, Hm, Jm = W
+    y, g = V[0], V[1]
+    n = ndof(P)
+    m = 2 * n
+    s = len(D.b)
+    for i in range(s):
+        for r in range(m):
+            Zs[i, r] = z[r]
+    prev = np.inf
+    status = NEWTON
+    for it in range(NEWTON_MAX):
+        for j in range(s):
+            for r in range(m):
+                y[r] = Zs[j, r]
+            grad(P, C, j, y, g)
+            for r in range(n):
+                Fs[j, r] = g[n + r]
+                Fs[j, n + r] = -g[r]
+        for i in range(s):
+            for r in range(m):
+                acc = z[r] - Zs[i, r]
+                for j in range(s):
+                    acc += h * D.A[i * s + j] * Fs[j, r]
+                F[i * m + r] = acc
+        for j in range(s):
+            for r in range(m):
+                y[r] = Zs[j, r]
+            hess(P, C, j, y, Hm)
+            for i in range(s):
+                a = h * D.A[i * s + j]
+                for r in range(n):
+                    for c in range(m):
+                        Jm[i * m + r, j * m + c] = -a * Hm[n + r, c]
+                        Jm[i * m + n + r, j * m + c] = a * Hm[r, c]
+        for r in range(s * m):
+            Jm[r, r] += 1.0
+        if not solve(Jm, F, s * m, 1):
+            status = SINGULAR
+            break
+        for i in range(s):
+            for r in range(m):
+                Zs[i, r] += F[i * m + r]
+        done, prev = _newton_done(F, s * m, z, m, prev)
+        if done or is_linear(P):
+            status = OK
+            break
+    if status == OK:
+        dpt = 0.0 * pt
+        for j in range(s):
+            for r in range(m):
+                y[r] = Zs[j, r]
+            grad(P, C, j, y, g)
+            bh = h * D.b[j]
+            for r in range(n):
+                z[r] += bh * g[n + r]
+                z[n + r] -= bh * g[r]
+            dpt += D.b[j] * dhdt(P, C, j, y)
+        pt = pt - h * dpt
+    return status, pt
+
+
+@njit(**SCRATCH)
+def boris_work(D, P, z):
+    return vectors(P, 5, z)
+
+
+@njit(**INLINE)
+def boris_core(P, C, h, z, pt, V):
+    """Drift-kick-drift Boris push in (q, v), v = (p - e A) / m; fields at the half step.
+    Leaves the half-step state (q, p) in V[4]."""
+    q, v, A, E, zh = V[0], V[1], V[2], V[3], V[4]
+    a = P.e * h / (2.0 * P.m)
+    vecpot(P, C, 0, z, A)
+    v0x = (z[2] - P.e * A[0]) / P.m
+    v0y = (z[3] - P.e * A[1]) / P.m
+    q[0] = z[0] + 0.5 * h * v0x
+    q[1] = z[1] + 0.5 * h * v0y
+    efield(P, C, 1, q, E)
+    tau = a * bfield(P, C, 1)
+    sig = 2.0 * tau / (1.0 + tau * tau)
+    vx = v0x + a * E[0]
+    vy = v0y + a * E[1]
+    wx = vx + vy * tau
+    wy = vy - vx * tau
+    vx += wy * sig
+    vy -= wx * sig
+    v[0] = vx + a * E[0]
+    v[1] = vy + a * E[1]
+    vecpot(P, C, 1, q, A)
+    zh[0] = q[0]
+    zh[1] = q[1]
+    zh[2] = 0.5 * P.m * (v0x + v[0]) + P.e * A[0]
+    zh[3] = 0.5 * P.m * (v0y + v[1]) + P.e * A[1]
+    pt = pt - h * dhdt(P, C, 1, zh)
+    z[0] = q[0] + 0.5 * h * v[0]
+    z[1] = q[1] + 0.5 * h * v[1]
+    vecpot(P, C, 2, z, A)
+    z[2] = P.m * v[0] + P.e * A[0]
+    z[3] = P.m * v[1] + P.e * A[1]
+    return OK, pt
+
+
+@njit(**INLINE)
+def boris_step(D, P, C, t, h, z, pt, W):
+    return boris_core(P, C, h, z, pt, W)
+
+
+@njit(**SCRATCH)
+def exact_work(D, P, z):
+    return vectors(P, 1, z)
+
+
+@njit(**INLINE)
+def exact_step(D, P, C, t, h, z, pt, W):
+    """The scene's exact flow; p_t follows from the exact conservation of H + p_t."""
+    H0 = energy(P, C, 0, z)
+    flow(P, t, t + h, z)
+    return OK, pt + H0 - energy(P, C, 1, z)

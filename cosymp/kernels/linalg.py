@@ -1,0 +1,87 @@
+"""Small dense linear algebra for implicit steps (real or complex, any size)."""
+from numba import njit
+from numba.extending import overload
+
+from .dispatch import _INLINE, INLINE
+
+
+@njit(**INLINE)
+def solve(A, B, n, k):
+    """Overwrite the leading n x k block of B with A^-1 B (partial pivoting); A is destroyed.
+
+    B is 2-D (k right-hand sides) or 1-D (k = 1). Returns False if a pivot is exactly zero.
+    """
+    for c in range(n):
+        p = c
+        big = abs(A[c, c])
+        for i in range(c + 1, n):
+            v = abs(A[i, c])
+            if v > big:
+                big = v
+                p = i
+        if big == 0.0:
+            return False
+        if p != c:
+            for j in range(c, n):
+                A[c, j], A[p, j] = A[p, j], A[c, j]
+            _swap_rows(B, c, p, k)
+        inv = 1.0 / A[c, c]
+        for i in range(c + 1, n):
+            f = A[i, c] * inv
+            if f != 0.0:
+                for j in range(c + 1, n):
+                    A[i, j] -= f * A[c, j]
+                _axpy_rows(B, i, c, -f, k)
+    for c in range(n - 1, -1, -1):
+        for j in range(c + 1, n):
+            _axpy_rows(B, c, j, -A[c, j], k)
+        _scale_row(B, c, 1.0 / A[c, c], k)
+    return True
+
+
+def _swap_rows(B, a, b, k):
+    """Swap rows a and b of B (a vector, or k columns)."""
+
+
+def _axpy_rows(B, i, c, f, k):
+    """Row i of B += f * row c."""
+
+
+def _scale_row(B, c, f, k):
+    """Row c of B *= f."""
+
+
+@overload(_swap_rows, jit_options=_INLINE)
+def _swap_rows_impl(B, a, b, k):
+    if B.ndim == 1:
+        def swap(B, a, b, k):
+            B[a], B[b] = B[b], B[a]
+    else:
+        def swap(B, a, b, k):
+            for j in range(k):
+                B[a, j], B[b, j] = B[b, j], B[a, j]
+    return swap
+
+
+@overload(_axpy_rows, jit_options=_INLINE)
+def _axpy_rows_impl(B, i, c, f, k):
+    if B.ndim == 1:
+        def axpy(B, i, c, f, k):
+            B[i] += f * B[c]
+    else:
+        def axpy(B, i, c, f, k):
+            for j in range(k):
+                B[i, j] += f * B[c, j]
+    return axpy
+
+
+@overload(_scale_row, jit_options=_INLINE)
+def _scale_row_impl(B, c, f, k):
+    if B.ndim == 1:
+        def scale(B, c, f, k):
+            B[c] *= f
+    else:
+        def scale(B, c, f, k):
+            for j in range(k):
+                B[c, j] *= f
+    return scale

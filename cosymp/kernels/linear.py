@@ -1,0 +1,277 @@
+"""The step of a linear scene as a matrix: z_(k+1) = M z_k, p_t,(k+1) = p_t,k - (z_k.Q z_k / 2 + s).
+
+For a quadratic H = z.S(t).z/2 + s(t) (every scene of the paper) each method's step is linear in
+z, its implicit equations are one closed-form linear solve, and (M, Q, s) depends on the step's
+time only: it is built once per step from the coefficient rows C[j] (S, dS/dt, s, ds/dt, see
+scenes.quadratic) and applied to every member of an ensemble. M is also the exact tangent map.
+"""
+from numba import njit
+
+from .dispatch import INLINE, SCRATCH, flow, ndof
+from .families import boris_core
+from .linalg import solve
+from .stack import matrices, stage_matrices, stage_square, vectors
+
+
+@njit(**INLINE)
+def js(C, j, n, i, c):
+    """(J S_j)[i, c] with J = [[0, I], [-I, 0]]."""
+    m = 2 * n
+    return C[j, (n + i) * m + c] if i < n else -C[j, (i - n) * m + c]
+
+
+@njit(**INLINE)
+def sdot(C, j, m, i, c):
+    """(dS/dt)_j[i, c]."""
+    return C[j, m * m + i * m + c]
+
+
+@njit(**INLINE)
+def sdot0(C, j, m):
+    """ds/dt at row j."""
+    return C[j, 2 * m * m + 1]
+
+
+@njit(**INLINE)
+def identity(A, m):
+    for i in range(m):
+        for c in range(m):
+            A[i, c] = 1.0 if i == c else 0.0
+
+
+@njit(**INLINE)
+def add_sandwich(Q, G, C, j, m, scale, T):
+    """Q += scale * G^T (dS/dt)_j G, with T an m x m scratch."""
+    for i in range(m):
+        for c in range(m):
+            acc = 0.0
+            for r in range(m):
+                acc += sdot(C, j, m, i, r) * G[r, c]
+            T[i, c] = acc
+    for i in range(m):
+        for c in range(m):
+            acc = 0.0
+            for r in range(m):
+                acc += G[r, i] * T[r, c]
+            Q[i, c] += scale * acc
+
+
+@njit(**INLINE)
+def theta_matrix(P, C, j, h, wq0, wq1, wp0, wp1, M, Q, A, N):
+    """(I - h J S W1) M = I + h J S W0, N = W0 + W1 M, Q = h N^T S' N, s = h s'."""
+    n = ndof(P)
+    m = 2 * n
+    for i in range(m):
+        for c in range(m):
+            a = h * js(C, j, n, i, c)
+            d = 1.0 if i == c else 0.0
+            A[i, c] = d - a * (wq1 if c < n else wp1)
+            M[i, c] = d + a * (wq0 if c < n else wp0)
+    solve(A, M, m, m)
+    for i in range(m):
+        w0, w1 = (wq0, wq1) if i < n else (wp0, wp1)
+        for c in range(m):
+            N[i, c] = w1 * M[i, c] + (w0 if i == c else 0.0)
+    for i in range(m):
+        for c in range(m):
+            Q[i, c] = 0.0
+    add_sandwich(Q, N, C, j, m, h, A)
+    return h * sdot0(C, j, m)
+
+
+@njit(**INLINE)
+def compose(M, Q, s, M1, Q1, s1, m, T):
+    """(M, Q, s) <- (M1, Q1, s1) after (M, Q, s)."""
+    for i in range(m):
+        for c in range(m):
+            acc = 0.0
+            for r in range(m):
+                acc += Q1[i, r] * M[r, c]
+            T[i, c] = acc
+    for i in range(m):
+        for c in range(m):
+            acc = 0.0
+            for r in range(m):
+                acc += M[r, i] * T[r, c]
+            Q[i, c] += acc
+    for i in range(m):
+        for c in range(m):
+            acc = 0.0
+            for r in range(m):
+                acc += M1[i, r] * M[r, c]
+            T[i, c] = acc
+    for i in range(m):
+        for c in range(m):
+            M[i, c] = T[i, c]
+    return s + s1
+
+
+@njit(**SCRATCH)
+def theta_lwork(D, P):
+    return matrices(P, 2, 0.0)
+
+
+@njit(**INLINE)
+def theta_lmatrix(D, P, C, t, h, M, Q, W):
+    return theta_matrix(P, C, 0, h, D.wq0, D.wq1, D.wp0, D.wp1, M, Q, W[0], W[1])
+
+
+@njit(**SCRATCH)
+def composition_lwork(D, P):
+    return matrices(P, 5, 0.0)
+
+
+@njit(**INLINE)
+def composition_lmatrix(D, P, C, t, h, M, Q, W):
+    m = 2 * ndof(P)
+    identity(M, m)
+    for i in range(m):
+        for c in range(m):
+            Q[i, c] = 0.0
+    s = 0.0
+    for i in range(len(D.gammas)):
+        s1 = theta_matrix(P, C, i, D.gammas[i] * h, 0.5, 0.5, 0.5, 0.5, W[2], W[3], W[0], W[1])
+        s = compose(M, Q, s, W[2], W[3], s1, m, W[4])
+    return s
+
+
+@njit(**SCRATCH)
+def gauss_lwork(D, P):
+    return matrices(P, 1, 0.0), stage_square(D, P, 0.0), stage_matrices(D, P, 0.0)
+
+
+@njit(**INLINE)
+def gauss_lmatrix(D, P, C, t, h, M, Q, W):
+    """Stage maps G_i = I + h sum_j a_ij J S_j G_j (one solve), M = I + h sum_j b_j J S_j G_j."""
+    V, Big, G = W
+    n = ndof(P)
+    m = 2 * n
+    s = len(D.b)
+    for i in range(s):
+        for j in range(s):
+            for r in range(m):
+                for c in range(m):
+                    Big[i * m + r, j * m + c] = (1.0 if i == j and r == c else 0.0) \
+                        - h * D.A[i * s + j] * js(C, j, n, r, c)
+    Gs = G.reshape((s * m, m))
+    for r in range(s * m):
+        for c in range(m):
+            Gs[r, c] = 1.0 if r % m == c else 0.0
+    solve(Big, Gs, s * m, m)
+    identity(M, m)
+    for i in range(m):
+        for c in range(m):
+            Q[i, c] = 0.0
+    total = 0.0
+    for j in range(s):
+        hb = h * D.b[j]
+        for i in range(m):
+            for c in range(m):
+                acc = 0.0
+                for r in range(m):
+                    acc += js(C, j, n, i, r) * G[j, r, c]
+                M[i, c] += hb * acc
+        add_sandwich(Q, G[j], C, j, m, hb, V[0])
+        total += hb * sdot0(C, j, m)
+    return total
+
+
+@njit(**SCRATCH)
+def explicit_lwork(D, P):
+    return matrices(P, 2, 0.0), stage_matrices(D, P, 0.0)
+
+
+@njit(**INLINE)
+def explicit_lmatrix(D, P, C, t, h, M, Q, W):
+    """Stage maps G_i = I + h sum_(j<i) a_ij K_j with K_j = J S_j G_j; M = I + h sum b_i K_i."""
+    V, K = W
+    n = ndof(P)
+    m = 2 * n
+    s = len(D.b)
+    G = V[0]
+    identity(M, m)
+    for i in range(m):
+        for c in range(m):
+            Q[i, c] = 0.0
+    total = 0.0
+    for i in range(s):
+        row = D.stage[i]
+        identity(G, m)
+        for j in range(i):
+            a = h * D.A[i * s + j]
+            if a != 0.0:
+                for r in range(m):
+                    for c in range(m):
+                        G[r, c] += a * K[j, r, c]
+        for r in range(m):
+            for c in range(m):
+                acc = 0.0
+                for x in range(m):
+                    acc += js(C, row, n, r, x) * G[x, c]
+                K[i, r, c] = acc
+        hb = h * D.b[i]
+        for r in range(m):
+            for c in range(m):
+                M[r, c] += hb * K[i, r, c]
+        add_sandwich(Q, G, C, row, m, hb, V[1])
+        total += hb * sdot0(C, row, m)
+    return total
+
+
+@njit(**SCRATCH)
+def exact_lwork(D, P):
+    return matrices(P, 1, 0.0), vectors(P, 1, 0.0)
+
+
+@njit(**INLINE)
+def exact_lmatrix(D, P, C, t, h, M, Q, W):
+    """Columns of M from the flow; p_t from H + p_t conserved: Q = M^T S(t+h) M - S(t)."""
+    S1M = W[0][0]
+    v = W[1][0]
+    m = 2 * ndof(P)
+    for c in range(m):
+        for r in range(m):
+            v[r] = 1.0 if r == c else 0.0
+        flow(P, t, t + h, v)
+        for r in range(m):
+            M[r, c] = v[r]
+    for i in range(m):
+        for c in range(m):
+            acc = 0.0
+            for r in range(m):
+                acc += C[1, i * m + r] * M[r, c]
+            S1M[i, c] = acc
+    for i in range(m):
+        for c in range(m):
+            acc = 0.0
+            for r in range(m):
+                acc += M[r, i] * S1M[r, c]
+            Q[i, c] = acc - C[0, i * m + c]
+    return C[1, 2 * m * m] - C[0, 2 * m * m]
+
+
+@njit(**SCRATCH)
+def boris_lwork(D, P):
+    return matrices(P, 2, 0.0), vectors(P, 6, 0.0)
+
+
+@njit(**INLINE)
+def boris_lmatrix(D, P, C, t, h, M, Q, W):
+    """Columns of M and of the half-step map N (z_half = N z) from the push of unit vectors;
+    Q = h N^T S'(t + h/2) N."""
+    MM, V = W
+    N = MM[0]
+    m = 2 * ndof(P)
+    v = V[5]
+    for c in range(m):
+        for r in range(m):
+            v[r] = 1.0 if r == c else 0.0
+        boris_core(P, C, h, v, 0.0, V)
+        for r in range(m):
+            M[r, c] = v[r]
+            N[r, c] = V[4][r]
+    for i in range(m):
+        for c in range(m):
+            Q[i, c] = 0.0
+    add_sandwich(Q, N, C, 1, m, h, MM[1])
+    return h * sdot0(C, 1, m)

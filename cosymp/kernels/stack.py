@@ -1,0 +1,127 @@
+"""Scratch arrays on the machine stack, sized at compile time, as a C loop would declare them.
+
+The compiled loops keep their small vectors and matrices here rather than on the heap: the
+compiler then sees every element at a constant offset of a private buffer and keeps it in
+registers (measured: the theta step's matrices in 6.8 ns instead of 22.8 ns on the heap).
+A stack array lives as long as the compiled function that declares it; all kernels inline
+their callees in numba's IR, so the declaring function is always the loop itself.
+"""
+import llvmlite.ir as ir
+import numpy as np
+from numba.core import cgutils, types
+from numba.core.errors import TypingError
+from numba.extending import intrinsic, overload
+from numba.np.arrayobj import make_array, populate_array
+
+from .dispatch import _SCRATCH
+
+
+@intrinsic(prefer_literal=True)
+def stack_array(typingctx, shape, like):
+    """An uninitialised C-contiguous array of the literal `shape`, dtype of `like`."""
+    if not isinstance(shape, types.BaseTuple) or not all(
+            isinstance(t, types.IntegerLiteral) for t in shape.types):
+        raise TypingError("stack_array needs a tuple of literal sizes")
+    dims = [t.literal_value for t in shape.types]
+    dtype = like.dtype if isinstance(like, types.Array) else like
+    aty = types.Array(dtype, len(dims), "C")
+
+    def codegen(context, builder, sig, args):
+        item_type = context.get_value_type(dtype)
+        buf = cgutils.alloca_once(builder, ir.ArrayType(item_type, max(1, int(np.prod(dims)))))
+        intp = context.get_value_type(types.intp)
+        item = context.get_abi_sizeof(item_type)
+        strides = [item * int(np.prod(dims[i + 1:])) for i in range(len(dims))]
+        ary = make_array(aty)(context, builder)
+        populate_array(ary, data=builder.bitcast(buf, item_type.as_pointer()),
+                       shape=[ir.Constant(intp, d) for d in dims],
+                       strides=[ir.Constant(intp, s) for s in strides],
+                       itemsize=ir.Constant(intp, item), meminfo=None)
+        return ary._getvalue()
+
+    return aty(shape, like), codegen
+
+
+def _scene(P):
+    from ..scenes import KERNELS
+
+    return KERNELS[P.instance_class]
+
+
+def _stages(D):
+    return D.types[D.fields.index("b")].count
+
+
+def vectors(P, k, like):
+    """k stack vectors of the scene's state size 2n."""
+
+
+def matrices(P, k, like):
+    """k stack matrices 2n x 2n."""
+
+
+def stage_vectors(D, P, like):
+    """One stack vector of size 2n per stage of the tableau D."""
+
+
+def stage_flat(D, P, like):
+    """One stack vector of size stages * 2n."""
+
+
+def stage_matrices(D, P, like):
+    """One 2n x 2n stack matrix per stage of the tableau D."""
+
+
+def stage_square(D, P, like):
+    """A stack matrix (stages * 2n) x (stages * 2n)."""
+
+
+def coef_table(D, P):
+    """The stack table of time coefficients: one row per time offset of D."""
+
+
+@overload(vectors, jit_options=_SCRATCH, inline="always", prefer_literal=True)
+def _vectors(P, k, like):
+    m = 2 * _scene(P).ndof
+    kk = k.literal_value
+    return lambda P, k, like: stack_array((kk, m), like)
+
+
+@overload(matrices, jit_options=_SCRATCH, inline="always", prefer_literal=True)
+def _matrices(P, k, like):
+    m = 2 * _scene(P).ndof
+    kk = k.literal_value
+    return lambda P, k, like: stack_array((kk, m, m), like)
+
+
+@overload(stage_vectors, jit_options=_SCRATCH, inline="always")
+def _stage_vectors(D, P, like):
+    m = 2 * _scene(P).ndof
+    s = _stages(D)
+    return lambda D, P, like: stack_array((s, m), like)
+
+
+@overload(stage_flat, jit_options=_SCRATCH, inline="always")
+def _stage_flat(D, P, like):
+    sm = 2 * _scene(P).ndof * _stages(D)
+    return lambda D, P, like: stack_array((sm,), like)
+
+
+@overload(stage_matrices, jit_options=_SCRATCH, inline="always")
+def _stage_matrices(D, P, like):
+    m = 2 * _scene(P).ndof
+    s = _stages(D)
+    return lambda D, P, like: stack_array((s, m, m), like)
+
+
+@overload(stage_square, jit_options=_SCRATCH, inline="always")
+def _stage_square(D, P, like):
+    sm = 2 * _scene(P).ndof * _stages(D)
+    return lambda D, P, like: stack_array((sm, sm), like)
+
+
+@overload(coef_table, jit_options=_SCRATCH, inline="always")
+def _coef_table(D, P):
+    u = D.types[D.fields.index("offsets")].count
+    nc = _scene(P).ncoef
+    return lambda D, P: stack_array((u, nc), 0.0)

@@ -1,0 +1,163 @@
+"""The method registry: a method is data for one of the generic family kernels.
+
+Every method acts on the extended state (q, t, p, p_t); t advances by exactly h per step.
+"""
+import math
+from dataclasses import dataclass
+from functools import cache
+from typing import Callable
+
+import numpy as np
+
+from .errors import InputError
+from .kernels.families import Boris, Composition, Exact, Explicit, Gauss, Theta
+
+
+def _floats(x):
+    return tuple(float(v) for v in np.ravel(x))
+
+
+def _explicit(A, b, c):
+    offsets, stage = np.unique(np.asarray(c, float), return_inverse=True)
+    return Explicit(_floats(A), _floats(b), tuple(int(i) for i in stage), _floats(offsets))
+
+
+def _lifted(theta):
+    """The paper's cotangent lift of R_d(q, v) = (q - theta v, q + (1 - theta) v):
+    q at theta, p at 1 - theta, t at t_k + theta h (PHYSICS.md section 2)."""
+    return Theta(1.0 - theta, theta, theta, 1.0 - theta, (theta,))
+
+
+def _naive(theta):
+    """The ordinary theta-method: q, p and t all at the same theta point."""
+    return Theta(1.0 - theta, theta, 1.0 - theta, theta, (theta,))
+
+
+def _composition(gammas):
+    gammas = np.asarray(gammas, float)
+    starts = np.concatenate(([0.0], np.cumsum(gammas)[:-1]))
+    return Composition(_floats(gammas), _floats(starts + 0.5 * gammas))
+
+
+def _triple_jump(inner, order):
+    """Yoshida's symmetric triple jump: raises a symmetric method of order `order` by two."""
+    g1 = 1.0 / (2.0 - 2.0 ** (1.0 / (order + 1)))
+    g0 = 1.0 - 2.0 * g1
+    return [g * x for g in (g1, g0, g1) for x in inner]
+
+
+def _rk4():
+    A = np.zeros((4, 4))
+    A[1, 0] = A[2, 1] = 0.5
+    A[3, 2] = 1.0
+    return _explicit(A, [1 / 6, 1 / 3, 1 / 3, 1 / 6], [0.0, 0.5, 0.5, 1.0])
+
+
+def _rk8():
+    """DOP853's eighth-order tableau (taken from scipy), used at a fixed step."""
+    from scipy.integrate._ivp import dop853_coefficients as d
+
+    s = d.N_STAGES
+    return _explicit(d.A[:s, :s], d.B, d.C[:s])
+
+
+def _gauss4():
+    r = math.sqrt(3.0) / 6.0
+    A = np.array([[0.25, 0.25 - r], [0.25 + r, 0.25]])
+    return Gauss(_floats(A), (0.5, 0.5), (0.5 - r, 0.5 + r))
+
+
+@dataclass(frozen=True)
+class Method:
+    """A named method. `build(theta)` gives the family data the kernels run."""
+
+    name: str
+    title: str
+    doc: str
+    order: int
+    preserves: str
+    build: Callable
+    takes_theta: bool = False
+    requires: str = ""
+
+    def order_at(self, theta):
+        if self.takes_theta:
+            return 2 if theta == 0.5 else 1
+        return self.order
+
+    def preserves_at(self, theta):
+        if self.name == "theta-naive" and theta != 0.5:
+            return "none"
+        return self.preserves
+
+    def refusal(self, scene):
+        """None if the method applies to the scene, else the reason it does not."""
+        if self.requires == "flow" and not scene.has_flow:
+            return (f"method '{self.name}' needs a closed-form flow and scene '{scene.name}' has none: "
+                    f"use it on {', '.join(_with('has_flow'))}")
+        if self.requires == "fields" and not scene.has_fields:
+            return (f"method '{self.name}' pushes a charge in E and B fields; scene '{scene.name}' has "
+                    f"none: use it on {', '.join(_with('has_fields'))}")
+        return None
+
+    def data(self, theta=None):
+        if self.takes_theta:
+            theta = 0.5 if theta is None else theta
+            if not (isinstance(theta, (int, float)) and 0.0 <= theta <= 1.0):
+                raise InputError(f"theta = {theta} is outside [0, 1]: pass --theta between 0 and 1")
+            return _data(self.name, float(theta))
+        if theta is not None:
+            raise InputError(f"method '{self.name}' takes no theta: use 'theta' or 'theta-naive'")
+        return _data(self.name, None)
+
+
+def _with(attr):
+    from .scenes import SCENES
+
+    return [s.name for s in SCENES.values() if getattr(s, attr)]
+
+
+@cache
+def _data(name, theta):
+    m = METHODS[name]
+    return m.build(theta) if m.takes_theta else m.build()
+
+
+_TJ4 = _triple_jump([1.0], 2)
+
+METHODS = {m.name: m for m in (
+    Method("euler", "Explicit Euler", "explicit Euler on the extended ODE (non-preserving reference)",
+           1, "none", lambda: _explicit([[0.0]], [1.0], [0.0])),
+    Method("rk4", "Classical RK4", "classical fourth-order Runge-Kutta (non-preserving reference)",
+           4, "none", _rk4),
+    Method("rk8", "RK8 (DOP853 tableau)", "explicit order-8 Runge-Kutta, DOP853's tableau at a fixed "
+           "step; the reference integrator for scenes without a closed-form flow", 8, "none", _rk8),
+    Method("theta", "Lifted theta-method", "the paper's cotangent-lifted discretization map: q at "
+           "theta, p at 1 - theta; slice-symplectic for every theta in [0, 1]", 1, "symplectic",
+           _lifted, takes_theta=True),
+    Method("midpoint", "Implicit midpoint", "the lifted theta-method at theta = 1/2", 2, "symplectic",
+           lambda: _lifted(0.5)),
+    Method("symplectic-euler", "Symplectic Euler (paper's scheme)", "the lifted theta-method at "
+           "theta = 0: q, t at step k, p at k+1 (the paper's eq. euler-type)", 1, "symplectic",
+           lambda: _lifted(0.0)),
+    Method("theta-naive", "Naive theta-method", "the ordinary theta-method: q, p, t all at theta; "
+           "symplectic only at theta = 1/2", 1, "symplectic", _naive, takes_theta=True),
+    Method("gauss4", "Gauss-Legendre 4", "2-stage Gauss-Legendre collocation, order 4, symplectic",
+           4, "symplectic", _gauss4),
+    Method("composition4", "Midpoint triple jump (order 4)", "symmetric composition of 3 midpoint "
+           "steps (Yoshida's triple jump)", 4, "symplectic", lambda: _composition(_TJ4)),
+    Method("composition6", "Midpoint composition (order 6)", "the triple jump applied to the order-4 "
+           "composition: 9 midpoint steps", 6, "symplectic",
+           lambda: _composition(_triple_jump(_TJ4, 4))),
+    Method("boris", "Boris push", "the standard charged-particle pusher (drift-kick-drift, fields at "
+           "the half step); volume-preserving, gauge-independent", 2, "volume",
+           lambda: Boris((0.0, 0.5, 1.0)), requires="fields"),
+    Method("exact", "Exact flow", "the scene's closed-form flow", 0, "exact",
+           lambda: Exact((0.0, 1.0)), requires="flow"),
+)}
+
+
+def method(name):
+    if name not in METHODS:
+        raise InputError(f"unknown method '{name}': choose one of {', '.join(METHODS)}")
+    return METHODS[name]

@@ -1,0 +1,108 @@
+"""What a scene is: parameters with defaults, bounds and docs, equations, and its jitted core."""
+import math
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from ..errors import InputError
+
+
+@dataclass(frozen=True)
+class Param:
+    """A scene parameter. Numeric unless choices is set; initial marks an initial condition."""
+
+    name: str
+    default: object
+    doc: str
+    bounds: tuple = (-math.inf, math.inf)
+    initial: bool = False
+    choices: tuple = ()
+
+    def check(self, value):
+        """The value as the scene stores it, or InputError saying what to change."""
+        if self.choices:
+            if value not in self.choices:
+                raise InputError(f"unknown {self.name} '{value}': choose one of {', '.join(self.choices)}")
+            return value
+        try:
+            x = float(value)
+        except (TypeError, ValueError):
+            raise InputError(f"{self.name} must be a number, got '{value}'") from None
+        lo, hi = self.bounds
+        if not math.isfinite(x) or not lo <= x <= hi:
+            raise InputError(f"{self.name} = {value} is outside [{lo:g}, {hi:g}]: {self.doc}")
+        return x
+
+
+@dataclass(frozen=True)
+class SceneKernel:
+    """The jitted functions the compiled loops dispatch to (see cosymp.kernels.dispatch)."""
+
+    ndof: int
+    ncoef: int
+    linear: bool
+    coef: Callable
+    energy: Callable
+    grad: Callable
+    hess: Callable
+    dhdt: Callable
+    flow: Callable = None
+    vecpot: Callable = None
+    efield: Callable = None
+    bfield: Callable = None
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A time-dependent Hamiltonian system H(q, p, t), defined once.
+
+    `pack` turns checked values into the kernel's parameter tuple (an instance of `Params`,
+    whose class selects the kernel); `initial` gives (q0, p0) in the scene's own coordinates.
+    """
+
+    name: str
+    title: str
+    summary: str
+    look_for: str
+    equations: tuple
+    params: tuple
+    kernel: SceneKernel
+    Params: type
+    h: float
+    T: float
+    time_scale: float
+    coordinates: tuple = ("q",)
+    notes: tuple = field(default_factory=tuple)
+
+    @property
+    def ndof(self):
+        return self.kernel.ndof
+
+    @property
+    def has_flow(self):
+        return self.kernel.flow is not None
+
+    @property
+    def has_fields(self):
+        return self.kernel.efield is not None
+
+    def values(self, overrides=None):
+        """Defaults updated by overrides, each checked; unknown names are refused."""
+        known = {p.name: p for p in self.params}
+        vals = {p.name: p.default for p in self.params}
+        for name, value in (overrides or {}).items():
+            if name not in known:
+                raise InputError(f"scene '{self.name}' has no parameter '{name}': "
+                                 f"use one of {', '.join(known)}")
+            vals[name] = known[name].check(value)
+        return vals
+
+    def pack(self, vals):
+        return self.Params(*(float(vals[f]) for f in self.Params._fields))
+
+    def initial(self, vals):
+        n = self.ndof
+        names = [p.name for p in self.params if p.initial]
+        z = np.array([vals[k] for k in names], dtype=float)
+        return z[:n], z[n:]

@@ -1,0 +1,83 @@
+"""The Caldirola-Kanai oscillator exactly as printed in the paper (Sec. 4.1)."""
+from collections import namedtuple
+
+import numpy as np
+from numba import njit
+
+from ..kernels.dispatch import INLINE
+from . import quadratic
+from .base import Param, Scene, SceneKernel
+
+DampedParams = namedtuple("DampedParams", "m w0 gamma")
+
+
+@njit(**INLINE)
+def coef(P, t, C, r):
+    grow = np.exp(P.gamma * t)
+    kin = grow / P.m
+    pot = P.m * P.w0 / grow
+    C[r, :] = 0.0
+    C[r, 0] = pot
+    C[r, 3] = kin
+    C[r, 4] = -P.gamma * pot
+    C[r, 7] = P.gamma * kin
+
+
+@njit(**INLINE)
+def flow(P, t0, t1, z):
+    """Exact flow of q'' - gamma q' + w0 q = 0 with p = m e^{-gamma t} q'.
+
+    With W^2 = w0 - gamma^2/4 and s = t1 - t0, C(s), S(s) solve u'' = -W^2 u with
+    C(0) = 1, C'(0) = 0, S(0) = 0, S'(0) = 1 (trigonometric, linear or hyperbolic).
+    """
+    s = t1 - t0
+    W2 = P.w0 - 0.25 * P.gamma * P.gamma
+    if W2 > 0.0:
+        W = np.sqrt(W2)
+        C = np.cos(W * s)
+        S = np.sin(W * s) / W
+    elif W2 < 0.0:
+        W = np.sqrt(-W2)
+        C = np.cosh(W * s)
+        S = np.sinh(W * s) / W
+    else:
+        C = 1.0
+        S = s
+    q, p = z[0], z[1]
+    grow = np.exp(P.gamma * t0)
+    half = np.exp(0.5 * P.gamma * s)
+    z[0] = half * (q * C + (grow * p / P.m - 0.5 * P.gamma * q) * S)
+    z[1] = (p * C + (0.5 * P.gamma * p - P.m * P.w0 * q / grow) * S) / half
+
+
+SCENE = Scene(
+    name="damped",
+    title="Damped oscillator (Caldirola-Kanai, as printed)",
+    summary="H = e^{gamma t} p^2/(2m) + e^{-gamma t} m w0 q^2/2, the paper's Sec. 4.1 with its "
+            "parameters. As printed it gives q'' - gamma q' + w0 q = 0.",
+    look_for="With the paper's sign, gamma > 0 makes q grow like e^{gamma t/2} while p decays "
+             "like e^{-gamma t/2}; gamma < 0 is the usual damping of q. H + p_t oscillates "
+             "boundedly for the structure-preserving methods and drifts for RK4 over long runs.",
+    equations=(r"H(q,p,t) = \frac{e^{\gamma t}}{2m}\,p^2 + \frac{m\,\omega_0}{2}\,e^{-\gamma t} q^2",
+               r"\dot q = \frac{e^{\gamma t}}{m} p,\quad \dot p = -m\omega_0 e^{-\gamma t} q,\quad "
+               r"\dot p_t = -\frac{\gamma e^{\gamma t}}{2m}p^2 + \frac{\gamma m\omega_0}{2} e^{-\gamma t} q^2",
+               r"\ddot q - \gamma\,\dot q + \omega_0\, q = 0"),
+    params=(
+        Param("m", 1.0, "mass m", (1e-3, 1e3)),
+        Param("w0", 1.0, "stiffness w0 (the paper writes w0 where w0^2 is usual; same at 1)", (0.0, 1e3)),
+        Param("gamma", 0.2, "gamma > 0 grows q and damps p (the paper's sign); gamma < 0 damps q",
+              (-10.0, 10.0)),
+        Param("q0", 1.0, "initial position q(0)", (-1e3, 1e3), initial=True),
+        Param("p0", 1.0, "initial momentum p(0)", (-1e3, 1e3), initial=True),
+    ),
+    kernel=SceneKernel(ndof=1, ncoef=quadratic.ncoef(1), linear=True, coef=coef,
+                       energy=quadratic.energy, grad=quadratic.grad, hess=quadratic.hess,
+                       dhdt=quadratic.dhdt, flow=flow),
+    Params=DampedParams,
+    h=0.1,
+    T=50.0,
+    time_scale=1.0,
+    notes=("Printed sign kept: the usual Caldirola-Kanai damping has the exponentials the other "
+           "way round, i.e. gamma -> -gamma here.",
+           "Volume-form run in the paper: gamma = 2e-4, T = 5e5."),
+)

@@ -1,0 +1,60 @@
+"""The paper's opening example: H = e^{-lam t} (p^2 + q^2) / 2 (lam = 1 in the paper)."""
+from collections import namedtuple
+
+import numpy as np
+from numba import njit
+
+from ..kernels.dispatch import INLINE
+from . import quadratic
+from .base import Param, Scene, SceneKernel
+
+DecayingParams = namedtuple("DecayingParams", "lam")
+
+
+@njit(**INLINE)
+def coef(P, t, C, r):
+    a = np.exp(-P.lam * t)
+    C[r, :] = 0.0
+    C[r, 0] = C[r, 3] = a
+    C[r, 4] = C[r, 7] = -P.lam * a
+
+
+@njit(**INLINE)
+def flow(P, t0, t1, z):
+    """A rotation by the elapsed 'clock' int e^{-lam t} dt."""
+    if P.lam == 0.0:
+        angle = t1 - t0
+    else:
+        angle = -np.exp(-P.lam * t0) * np.expm1(-P.lam * (t1 - t0)) / P.lam
+    c = np.cos(angle)
+    s = np.sin(angle)
+    q = z[0]
+    z[0] = c * q + s * z[1]
+    z[1] = -s * q + c * z[1]
+
+
+SCENE = Scene(
+    name="decaying",
+    title="Opening example: oscillator with decaying Hamiltonian",
+    summary="H = e^{-t}(p^2 + q^2)/2, the paper's first example; its exact flow is a rotation "
+            "by e^{-t_k} - e^{-t_{k+1}} per step.",
+    look_for="Explicit Euler's one-step determinant is 1 + h^2 e^{-2t_k} > 1: the orbit spirals "
+             "out. Structure-preserving methods keep det = 1 and stay on the exact circle's scale.",
+    equations=(r"H(q,p,t) = \tfrac12 e^{-\lambda t}\,(p^2+q^2)",
+               r"\dot q = e^{-\lambda t} p,\quad \dot p = -e^{-\lambda t} q,\quad "
+               r"\dot p_t = \tfrac{\lambda}{2} e^{-\lambda t}(p^2+q^2)",
+               r"\Phi_{t_k,h} = R\big((e^{-\lambda t_k}-e^{-\lambda (t_k+h)})/\lambda\big)"),
+    params=(
+        Param("lam", 1.0, "decay rate lambda of the Hamiltonian (the paper's example: 1)", (0.0, 10.0)),
+        Param("q0", 1.0, "initial position q(0)", (-1e3, 1e3), initial=True),
+        Param("p0", 1.0, "initial momentum p(0)", (-1e3, 1e3), initial=True),
+    ),
+    kernel=SceneKernel(ndof=1, ncoef=quadratic.ncoef(1), linear=True, coef=coef,
+                       energy=quadratic.energy, grad=quadratic.grad, hess=quadratic.hess,
+                       dhdt=quadratic.dhdt, flow=flow),
+    Params=DecayingParams,
+    h=0.1,
+    T=10.0,
+    time_scale=1.0,
+    notes=("The paper fixes lambda = 1; lambda = 0 is the plain harmonic oscillator.",),
+)

@@ -1,0 +1,68 @@
+"""Kapitza's pendulum: a pendulum whose pivot oscillates vertically, y_pivot = a cos(nu t)."""
+from collections import namedtuple
+
+import numpy as np
+from numba import njit
+
+from ..kernels.dispatch import INLINE
+from .base import Param, Scene, SceneKernel
+
+KapitzaParams = namedtuple("KapitzaParams", "w0 a nu")
+
+
+@njit(**INLINE)
+def coef(P, t, C, r):
+    """(g(t), g'(t)) with g = w0^2 - a nu^2 cos(nu t), the gravity felt in the pivot's frame."""
+    C[r, 0] = P.w0 * P.w0 - P.a * P.nu * P.nu * np.cos(P.nu * t)
+    C[r, 1] = P.a * P.nu * P.nu * P.nu * np.sin(P.nu * t)
+
+
+@njit(**INLINE)
+def energy(P, C, r, z):
+    return 0.5 * z[1] * z[1] - C[r, 0] * np.cos(z[0])
+
+
+@njit(**INLINE)
+def grad(P, C, r, z, g):
+    g[0] = C[r, 0] * np.sin(z[0])
+    g[1] = z[1]
+
+
+@njit(**INLINE)
+def hess(P, C, r, z, Hm):
+    Hm[0, 0] = C[r, 0] * np.cos(z[0])
+    Hm[0, 1] = Hm[1, 0] = 0.0
+    Hm[1, 1] = 1.0
+
+
+@njit(**INLINE)
+def dhdt(P, C, r, z):
+    return -C[r, 1] * np.cos(z[0])
+
+
+SCENE = Scene(
+    name="kapitza",
+    title="Kapitza's pendulum (vertically driven pivot)",
+    summary="H = p^2/2 - (w0^2 - a nu^2 cos(nu t)) cos q, lengths in units of the pendulum's, "
+            "q measured from the downward vertical. Nonlinear: the implicit methods iterate Newton.",
+    look_for="For a nu > sqrt(2) w0 (and nu >> w0) the inverted position q = pi becomes stable: "
+             "start near q = pi and watch the pendulum stay up, wobbling at the drive frequency.",
+    equations=(r"H(q,p,t) = \tfrac12 p^2 - \big(\omega_0^2 - a\nu^2\cos\nu t\big)\cos q",
+               r"\dot q = p,\quad \dot p = -\big(\omega_0^2 - a\nu^2\cos\nu t\big)\sin q,\quad "
+               r"\dot p_t = -a\nu^3\sin(\nu t)\cos q",
+               r"a\,\nu > \sqrt2\,\omega_0 \;\Rightarrow\; q=\pi \text{ stable (Kapitza)}"),
+    params=(
+        Param("w0", 1.0, "small-swing frequency sqrt(g/l) of the undriven pendulum", (0.0, 100.0)),
+        Param("a", 0.1, "pivot amplitude in units of the pendulum length", (0.0, 1.0)),
+        Param("nu", 40.0, "pivot drive frequency", (0.0, 1e3)),
+        Param("q0", 1.0, "initial angle q(0) from the downward vertical", (-10.0, 10.0), initial=True),
+        Param("p0", 0.0, "initial angular momentum p(0)", (-1e3, 1e3), initial=True),
+    ),
+    kernel=SceneKernel(ndof=1, ncoef=2, linear=False, coef=coef, energy=energy, grad=grad,
+                       hess=hess, dhdt=dhdt),
+    Params=KapitzaParams,
+    h=0.005,
+    T=20.0,
+    time_scale=0.1,
+    notes=("Not in the paper: the classic teaching case of a time-dependent Hamiltonian.",),
+)

@@ -1,0 +1,47 @@
+"""Shared lists: every scene x method pair the tests iterate, built from the registries.
+
+A new scene or method is tested by being added to its registry.
+"""
+import numpy as np
+import pytest
+
+from cosymp.integrate import Setup
+from cosymp.methods import METHODS
+from cosymp.scenes import SCENES
+
+THETAS = {"theta": (0.0, 0.3, 0.5, 1.0), "theta-naive": (0.3, 0.5)}
+
+
+def pairs(methods=None, scenes=None, linear_only=False):
+    """(scene, method, theta) triples: every method on every scene it applies to."""
+    out = []
+    for s in SCENES.values():
+        if scenes is not None and s.name not in scenes:
+            continue
+        if linear_only and not s.kernel.linear:
+            continue
+        for m in METHODS.values():
+            if methods is not None and m.name not in methods:
+                continue
+            if m.refusal(s) is None:
+                for th in THETAS.get(m.name, (None,)):
+                    out.append((s.name, m.name, th))
+    return out
+
+
+def case_id(case):
+    scene, method, theta = case
+    return f"{scene}-{method}" + ("" if theta is None else f"-{theta}")
+
+
+def structure_preserving(method, theta):
+    return METHODS[method].preserves_at(0.5 if theta is None else theta) == "symplectic"
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(20261121)
+
+
+def setup(scene, method, theta=None, **values):
+    return Setup.make(scene, method, values or None, theta)
