@@ -1,0 +1,113 @@
+"""The command-line contract: JSON fields, listings, and one-line errors for bad input."""
+import io
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from cosymp.cli import main
+from cosymp.integrate import MAX_STEPS
+
+
+def run_cli(*argv):
+    out, err = io.StringIO(), io.StringIO()
+    code = main(list(argv), out=out, err=err)
+    return code, out.getvalue(), err.getvalue()
+
+
+FIELDS = {"scene", "method", "h", "steps", "t_final", "q_final", "p_final", "pt_final", "H_ext_max_abs",
+          "det_max_dev", "symp_max_dev", "error_final", "wall_s"}
+
+
+def test_run_json_contract_damped_against_exact_flow():
+    code, out, err = run_cli("run", "damped", "--method", "midpoint", "--h", "0.1", "--T", "50", "--json")
+    assert code == 0, err
+    res = json.loads(out)
+    assert FIELDS <= set(res)
+    assert res["steps"] == 500 and res["t_final"] == pytest.approx(50.0)
+    assert len(res["q_final"]) == 1 and len(res["p_final"]) == 1
+    assert res["det_max_dev"] < 1e-13 and res["symp_max_dev"] < 1e-13
+    assert 1e-4 < res["error_final"] < 10
+    assert res["reference"] == "exact flow"
+
+
+def test_run_json_charged_transported_has_mechanical_momentum():
+    code, out, err = run_cli("run", "charged", "--method", "symplectic-euler", "--h", "0.001", "--T", "2",
+                             "--gauge", "landau", "--transport-from", "coulomb", "--json")
+    assert code == 0, err
+    res = json.loads(out)
+    assert len(res["Pi_final"]) == 2 and len(res["q_final"]) == 2
+    code, out0, _ = run_cli("run", "charged", "--method", "symplectic-euler", "--h", "0.001", "--T", "2",
+                            "--gauge", "coulomb", "--json")
+    base = json.loads(out0)
+    assert np.allclose(res["q_final"], base["q_final"], rtol=0, atol=1e-14)
+    assert np.allclose(res["Pi_final"], base["Pi_final"], rtol=0, atol=1e-13)
+    assert res["error_final"] is not None and res["reference_uncertainty"] < 1e-9
+
+
+def test_run_beta_expression_and_theta():
+    code, out, err = run_cli("run", "charged", "--method", "theta", "--theta", "0.3", "--T", "1",
+                             "--set", "beta=0.05*(1+tanh(t))", "--json")
+    assert code == 0, err
+    assert json.loads(out)["det_max_dev"] < 1e-12
+
+
+def test_readable_summary_and_listings():
+    code, out, _ = run_cli("run", "decaying", "--method", "euler", "--T", "5")
+    assert code == 0 and "max |det M_k - 1|" in out
+    code, out, _ = run_cli("scenes")
+    assert code == 0 and all(s in out for s in ("decaying", "damped", "modulated", "charged", "kapitza"))
+    assert "gamma = 0.2" in out
+    code, out, _ = run_cli("methods")
+    assert code == 0 and "symplectic-euler" in out and "gauss4" in out
+
+
+BAD = [
+    (["run", "damped", "--h", "0"], "h = 0"),
+    (["run", "damped", "--h", "-0.1"], "positive"),
+    (["run", "damped", "--h", "nan"], "finite"),
+    (["run", "damped", "--T", "inf"], "finite"),
+    (["run", "damped", "--h", "1e-9", "--T", "1e3"], "cap"),
+    (["run", "nosuch"], "unknown scene"),
+    (["run", "damped", "--method", "nosuch"], "unknown method"),
+    (["run", "charged", "--gauge", "weyl"], "unknown gauge"),
+    (["run", "damped", "--method", "theta", "--theta", "1.5"], "theta"),
+    (["run", "charged", "--set", "beta=t.__class__"], "beta"),
+    (["run", "charged", "--set", "beta=sin(t"], "beta"),
+    (["run", "damped", "--method", "boris"], "boris"),
+    (["run", "modulated", "--method", "exact"], "closed-form"),
+    (["run", "damped", "--set", "mass=2"], "no parameter"),
+    (["run", "damped", "--set", "gamma=abc"], "number"),
+    (["run", "damped", "--gauge", "coulomb"], "no gauges"),
+    (["run", "damped", "--method", "midpoint", "--theta", "0.2"], "takes no theta"),
+    (["run", "damped", "--h"], "expected one argument"),
+    (["frobnicate"], "invalid choice"),
+]
+
+
+@pytest.mark.parametrize("argv,words", BAD, ids=[" ".join(a) for a, _ in BAD])
+def test_bad_input_exits_2_with_one_line(argv, words):
+    code, out, err = run_cli(*argv)
+    assert code == 2
+    assert err.startswith("cosymp: ") and err.count("\n") == 1, err
+    assert words in err
+    assert "Traceback" not in err
+
+
+def test_step_cap_is_documented_value():
+    code, _, err = run_cli("run", "damped", "--h", "1", "--T", str(2 * MAX_STEPS))
+    assert code == 2 and f"{MAX_STEPS:.0e}" in err
+
+
+def test_run_failure_exits_3_with_time():
+    code, _, err = run_cli("run", "modulated", "--method", "rk4", "--h", "3", "--T", "10000", "--no-error")
+    assert code == 3 and "overflow" in err and "t = " in err and err.count("\n") == 1
+
+
+def test_console_entry_point_in_fresh_process():
+    """python -m cosymp: no traceback reaches the user on bad input."""
+    r = subprocess.run([sys.executable, "-m", "cosymp", "run", "damped", "--h", "-1"], capture_output=True,
+                       text=True, timeout=120)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "Traceback" not in r.stderr

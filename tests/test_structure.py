@@ -1,0 +1,89 @@
+"""Volume and symplecticity of the one-step maps, against known values."""
+import numpy as np
+import pytest
+from conftest import case_id, pairs, setup, structure_preserving
+
+from cosymp.diagnostics import det_deviation, symplecticity_defect, tangent_maps
+from cosymp.integrate import simulate
+
+ROUNDOFF = 1e-13
+LONG = 100_000
+# Parameters that keep 1e5 steps of each linear scene finite and time-dependent.
+LONG_VALUES = {"decaying": {"lam": 1e-3}, "damped": {"gamma": 2e-4}}
+
+
+def long_maps(scene, method, theta):
+    s = setup(scene, method, theta, **LONG_VALUES.get(scene, {}))
+    run = simulate(s, s.scene.h, LONG * s.scene.h)
+    assert run.steps == LONG
+    return tangent_maps(run)
+
+
+@pytest.mark.parametrize("case", [c for c in pairs(linear_only=True) if structure_preserving(c[1], c[2])],
+                         ids=case_id)
+def test_structure_preserved_at_roundoff(case):
+    M = long_maps(*case)
+    assert len(M) == LONG
+    assert np.max(det_deviation(M)) < ROUNDOFF
+    assert np.max(symplecticity_defect(M)) < ROUNDOFF
+
+
+def test_boris_preserves_volume():
+    M = long_maps("charged", "boris", None)
+    assert np.max(det_deviation(M)) < ROUNDOFF
+
+
+@pytest.mark.parametrize("h", [0.05, 0.1, 0.3])
+def test_euler_determinant_on_opening_example(h):
+    """The paper's Sec. 1: det = 1 + h^2 e^{-2 t_k} > 1."""
+    run = simulate(setup("decaying", "euler"), h, 40 * h)
+    M = tangent_maps(run)
+    expected = 1 + h ** 2 * np.exp(-2 * run.t[:-1])
+    assert np.allclose(np.linalg.det(M), expected, rtol=1e-14, atol=0)
+
+
+def _rk4_factor(h, a1, a2, a3):
+    """RK4's one-step map for z' = a(t) J z as a complex number (J acts as i)."""
+    k1 = 1j * a1
+    k2 = 1j * a2 * (1 + h / 2 * k1)
+    k3 = 1j * a2 * (1 + h / 2 * k2)
+    k4 = 1j * a3 * (1 + h * k3)
+    return 1 + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+
+@pytest.mark.parametrize("h", [0.1, 0.5, 1.0])
+def test_rk4_determinant_follows_stability_function(h):
+    """Constant coefficients: det = |R(ih)|^2 = 1 - h^6/72 + h^8/576. Time-dependent (opening
+    example): det = |R|^2 with RK4's stage coefficients e^{-t_k}, e^{-t_k - h/2}, e^{-t_k - h}."""
+    run = simulate(setup("modulated", "rk4", eps=0.0), h, 20 * h)
+    det = np.linalg.det(tangent_maps(run))
+    assert np.allclose(det, 1 - h ** 6 / 72 + h ** 8 / 576, rtol=1e-14, atol=0)
+    assert np.all(det < 1)
+    run = simulate(setup("decaying", "rk4"), h, 20 * h)
+    t = run.t[:-1]
+    R = _rk4_factor(h, np.exp(-t), np.exp(-t - h / 2), np.exp(-t - h))
+    assert np.allclose(np.linalg.det(tangent_maps(run)), np.abs(R) ** 2, rtol=1e-14, atol=0)
+
+
+@pytest.mark.parametrize("theta", [0.0, 0.25, 0.75, 1.0])
+@pytest.mark.parametrize("scene", ["decaying", "damped"])
+def test_naive_theta_is_not_symplectic_by_its_formula(scene, theta):
+    """det M = (1 + h^2 (1-theta)^2 det S) / (1 + h^2 theta^2 det S), S = Hessian at t_k + theta h;
+    in one degree of freedom ||M^T J M - J||_max = |det M - 1|."""
+    h = 0.2
+    run = simulate(setup(scene, "theta-naive", theta), h, 30 * h)
+    M = tangent_maps(run)
+    tt = run.t[:-1] + theta * h
+    detS = np.exp(-2 * tt) if scene == "decaying" else np.full_like(tt, run.setup.values["w0"])
+    expected = (1 + h ** 2 * (1 - theta) ** 2 * detS) / (1 + h ** 2 * theta ** 2 * detS)
+    assert np.allclose(np.linalg.det(M), expected, rtol=1e-14, atol=0)
+    assert np.min(det_deviation(M)) > 1e-8
+    assert np.allclose(symplecticity_defect(M), det_deviation(M), rtol=1e-9, atol=1e-15)
+
+
+@pytest.mark.parametrize("theta", [0.0, 0.25, 0.75, 1.0])
+def test_lifted_theta_on_nonlinear_scene(theta):
+    """Kapitza (Newton path): the lifted theta map stays symplectic to round-off."""
+    run = simulate(setup("kapitza", "theta", theta), 0.005, 5.0)
+    M = tangent_maps(run)
+    assert np.max(det_deviation(M)) < 1e-12
