@@ -17,6 +17,9 @@ import inspect
 from numba.core.errors import TypingError
 from numba.extending import overload
 
+from . import cachestamp
+
+cachestamp.install()
 JIT = {"cache": True, "fastmath": {"contract"}, "error_model": "numpy"}
 # Everything a step calls is inlined by LLVM (alwaysinline): left as calls, a Hessian or a
 # small solve costs more than the arithmetic of the step.
