@@ -1,0 +1,73 @@
+"""Diagnostics: the paper's estimators as printed, the rigorous companions, and the reference."""
+import numpy as np
+import pytest
+from conftest import setup
+
+from cosymp.diagnostics import (det_deviation, loop_action, nearby_states, paper_symplectic_form,
+                                paper_volume_form, ring_states, separation_omega, tangent_maps)
+from cosymp.integrate import initial_states, simulate
+from cosymp.reference import reference_final, scipy_reference
+
+
+def test_paper_estimators_are_the_printed_formulas():
+    s = setup("damped", "midpoint")
+    z0 = initial_states(s)[0]
+    run = simulate(s, 0.1, 5.0, z0=nearby_states(z0, 1e-4, 3), increments=True)
+    X = np.diff(run.z, axis=0)
+    omega = X[:, 1, 0] * X[:, 2, 1] - X[:, 1, 1] * X[:, 2, 0]
+    assert np.allclose(paper_symplectic_form(run), omega, rtol=1e-12, atol=0)
+    cols = np.stack([np.stack([X[:, i, 0], np.full(len(X), 0.1), X[:, i, 1]], -1) for i in (1, 2, 3)], -1)
+    assert np.allclose(paper_volume_form(run), np.linalg.det(cols), rtol=1e-10, atol=1e-30)
+
+
+@pytest.mark.parametrize("method", ["midpoint", "symplectic-euler", "gauss4", "euler", "rk4"])
+def test_separation_omega_and_loop_area_scale_by_the_determinant(method):
+    """One degree of freedom, linear scene: omega of separations and the area of a carried loop
+    are multiplied by det M_k at each step: constant for the symplectic methods, and for Euler
+    and RK4 off by exactly the product of their determinants."""
+    s = setup("damped", method)
+    z0 = initial_states(s)[0]
+    run = simulate(s, 0.1, 20.0, z0=nearby_states(z0, 1e-3, 2))
+    loop = simulate(s, 0.1, 20.0, z0=ring_states(z0, 0.1, 64))
+    dets = np.concatenate([[1.0], np.cumprod(np.linalg.det(tangent_maps(run)))])
+    w = separation_omega(run)
+    a = loop_action(loop)
+    assert a[0] == pytest.approx(64 * 0.01 * np.sin(2 * np.pi / 64) / 2, rel=1e-12)
+    assert np.allclose(w / w[0], dets, rtol=1e-9, atol=0)
+    assert np.allclose(a / a[0], dets, rtol=1e-12, atol=0)
+    if method in ("euler", "rk4"):
+        assert np.max(np.abs(dets - 1)) > 1e-6
+    else:
+        assert np.max(np.abs(dets - 1)) < 1e-13
+
+
+def test_tangent_map_by_complex_step_matches_linear_matrix():
+    """Two code paths: the linear scene's step matrix against the nonlinear (member-step) code
+    differentiated by complex step, on the pendulum linearised at q = 0 (a = 0: small swings)."""
+    s = setup("kapitza", "gauss4", a=0.0)
+    run = simulate(s, 0.05, 2.0, z0=[[1e-9, 0.0]])
+    M = tangent_maps(run)
+    h, w = 0.05, 1.0
+    lin = simulate(setup("modulated", "gauss4", eps=0.0), h, 2.0)
+    assert np.allclose(M, tangent_maps(lin), atol=1e-12)
+    assert np.max(det_deviation(M)) < 1e-13 and w == 1.0
+
+
+@pytest.mark.parametrize("scene", ["modulated", "charged", "kapitza"])
+def test_rk8_reference_agrees_with_scipy_dop853(scene):
+    s = setup(scene, "midpoint")
+    T = 2.0
+    z_ref, spread = reference_final(s, s.scene.h, T)
+    sol = scipy_reference(s, T)
+    assert np.allclose(z_ref[0], sol.y[:-1, -1], rtol=0, atol=1e-10)
+    assert spread[0] < 1e-10
+
+
+@pytest.mark.parametrize("method", ["gauss4", "composition6", "rk4"])
+def test_accurate_methods_agree_with_dop853(method):
+    for scene in ("modulated", "charged", "kapitza"):
+        s = setup(scene, method)
+        h = {"modulated": 0.05, "charged": 0.005, "kapitza": 0.002}[scene]
+        run = simulate(s, h, 2.0)
+        sol = scipy_reference(s, 2.0)
+        assert np.linalg.norm(run.z[-1, 0] - sol.y[:-1, -1]) < (1e-5 if method == "rk4" else 1e-6), scene
