@@ -37,7 +37,7 @@ def tangent_maps(traj, member=0, last=False):
     if not last:
         z, pt, t = z[:-1], pt[:-1], t[:-1]
     M = np.empty((len(t), z.shape[1], z.shape[1]))
-    status, k = tangent(s.data, s.P, float(traj.h), t, z, pt, M)
+    status, k = tangent(s)(s.data, s.P, float(traj.h), t, z, pt, M)
     if status != OK:
         msg = failure_message(status, k * traj.stride, t[k], traj.h)
         raise RunError(f"tangent map: {msg}", t[k], k * traj.stride)

@@ -139,8 +139,8 @@ def simulate(setup, h, T, z0=None, stride=None, increments=False, t0=0.0, pt0=No
     PTrec = np.empty((K, N))
     dZrec = np.empty((K if increments else 0, N, m))
     start = time.perf_counter()
-    status, done = propagate(setup.data, setup.P, float(t0), float(h), Z, PT, steps, stride,
-                             Trec, Zrec, PTrec, dZrec)
+    status, done = propagate(setup)(setup.data, setup.P, float(t0), float(h), Z, PT, steps, stride,
+                                    Trec, Zrec, PTrec, dZrec)
     wall = time.perf_counter() - start
     kept = done // stride + 1
     traj = _trajectory(setup, h, stride, Trec[:kept], Zrec[:kept], PTrec[:kept],

@@ -11,26 +11,27 @@ import numpy as np
 
 from .errors import InputError
 from .kernels.families import Boris, Composition, Exact, Explicit, Gauss, Theta
+from .kernels.stack import MAX_OFFSETS, MAX_STAGES
 
 
 def _floats(x):
-    return tuple(float(v) for v in np.ravel(x))
+    return np.ascontiguousarray(np.ravel(x), dtype=float)
 
 
 def _explicit(A, b, c):
     offsets, stage = np.unique(np.asarray(c, float), return_inverse=True)
-    return Explicit(_floats(A), _floats(b), tuple(int(i) for i in stage), _floats(offsets))
+    return Explicit(_floats(A), _floats(b), stage.astype(np.int64), offsets)
 
 
 def _lifted(theta):
     """The paper's cotangent lift of R_d(q, v) = (q - theta v, q + (1 - theta) v):
     q at theta, p at 1 - theta, t at t_k + theta h (PHYSICS.md section 2)."""
-    return Theta(1.0 - theta, theta, theta, 1.0 - theta, (theta,))
+    return Theta(1.0 - theta, theta, theta, 1.0 - theta, _floats([theta]))
 
 
 def _naive(theta):
     """The ordinary theta-method: q, p and t all at the same theta point."""
-    return Theta(1.0 - theta, theta, 1.0 - theta, theta, (theta,))
+    return Theta(1.0 - theta, theta, 1.0 - theta, theta, _floats([theta]))
 
 
 def _composition(gammas):
@@ -64,7 +65,7 @@ def _rk8():
 def _gauss4():
     r = math.sqrt(3.0) / 6.0
     A = np.array([[0.25, 0.25 - r], [0.25 + r, 0.25]])
-    return Gauss(_floats(A), (0.5, 0.5), (0.5 - r, 0.5 + r))
+    return Gauss(_floats(A), _floats([0.5, 0.5]), _floats([0.5 - r, 0.5 + r]))
 
 
 @dataclass(frozen=True)
@@ -120,7 +121,10 @@ def _with(attr):
 @cache
 def _data(name, theta):
     m = METHODS[name]
-    return m.build(theta) if m.takes_theta else m.build()
+    data = m.build(theta) if m.takes_theta else m.build()
+    stages = len(getattr(data, "b", ()))
+    assert len(data.offsets) <= MAX_OFFSETS and stages <= MAX_STAGES, "raise kernels.stack's bounds"
+    return data
 
 
 _TJ4 = _triple_jump([1.0], 2)
@@ -151,9 +155,9 @@ METHODS = {m.name: m for m in (
            lambda: _composition(_triple_jump(_TJ4, 4))),
     Method("boris", "Boris push", "the standard charged-particle pusher (drift-kick-drift, fields at "
            "the half step); volume-preserving, gauge-independent", 2, "volume",
-           lambda: Boris((0.0, 0.5, 1.0)), requires="fields"),
+           lambda: Boris(_floats([0.0, 0.5, 1.0])), requires="fields"),
     Method("exact", "Exact flow", "the scene's closed-form flow", 0, "exact",
-           lambda: Exact((0.0, 1.0)), requires="flow"),
+           lambda: Exact(_floats([0.0, 1.0])), requires="flow"),
 )}
 
 

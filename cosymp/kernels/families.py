@@ -3,8 +3,8 @@
 A step advances one trajectory of the extended state (q, t, p, p_t) by h, given the scene's
 time coefficients at the family's time offsets (row j of C at t + offsets[j] h, shared by every
 member of an ensemble). z = (q, p) is updated in place; the new p_t is returned with a status.
-Family data are tuples, so their sizes are known when a kernel compiles (stack scratch, loops
-unrolled). Linear scenes use the same families as matrices (kernels.linear).
+Family data are arrays: every tableau of a family runs one compiled loop, its stack scratch sized
+by kernels.stack's bounds. Linear scenes use the same families as matrices (kernels.linear).
 """
 from collections import namedtuple
 

@@ -153,7 +153,7 @@ def gauss_lmatrix(D, P, C, t, h, M, Q, W):
                 for c in range(m):
                     Big[i * m + r, j * m + c] = (1.0 if i == j and r == c else 0.0) \
                         - h * D.A[i * s + j] * js(C, j, n, r, c)
-    Gs = G.reshape((s * m, m))
+    Gs = G[:s].reshape((s * m, m))
     for r in range(s * m):
         for c in range(m):
             Gs[r, c] = 1.0 if r % m == c else 0.0

@@ -3,8 +3,7 @@ import numpy as np
 from numba import njit
 
 from .borrow import borrow
-from .dispatch import (INLINE, JIT, coef, dhdt, energy, grad, is_linear, lmatrix, lwork, ncoef, ndof,
-                       step, work)
+from .dispatch import INLINE, JIT, coef, dhdt, energy, grad, lmatrix, lwork, ncoef, ndof, step, work
 from .families import OK, OVERFLOW
 from .stack import coef_table, matrices, vectors
 
@@ -23,106 +22,144 @@ def _coefs(P, offsets, tk, tk1, h, C, reuse):
             coef(P, tk1 if offsets[j] == 1.0 else tk + offsets[j] * h, C, j)
 
 
-@njit(**JIT)
-def propagate(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec):
-    """Advance the N members of (Z, PT) by nsteps steps of h from t0 together.
+@njit(**INLINE)
+def _record_start(t0, Z, PT, Trec, Zrec, PTrec, dZrec, m):
+    Trec[0] = t0
+    for i in range(Z.shape[0]):
+        PTrec[0, i] = PT[i]
+        for r in range(m):
+            Zrec[0, i, r] = Z[i, r]
+            if dZrec.shape[0] > 0:
+                dZrec[0, i, r] = np.nan
 
-    Records every stride-th state (index j is step j*stride, index 0 the start) and, when dZrec
-    is non-empty, the increment z_k - z_(k-1) of the last step before each record. Returns
-    (status, k): k steps were completed; on failure the step k -> k+1 failed and the records
-    hold every recorded state before it. Linear scenes step by one matrix per step, shared by
-    all members (kernels.linear); others step each member (kernels.families).
+
+@njit(**INLINE)
+def _accept(status, i, z, old, pt, Z, PT, rec, recording, Zrec, PTrec, dZrec, m):
+    """Check the member's new state, store it, record it. Returns the status."""
+    if status == OK and not np.isfinite(pt):
+        status = OVERFLOW
+    for r in range(m):
+        if not np.isfinite(z[r]):
+            status = OVERFLOW
+    if status == OK:
+        PT[i] = pt
+        for r in range(m):
+            Z[i, r] = z[r]
+        if recording:
+            PTrec[rec, i] = pt
+            for r in range(m):
+                Zrec[rec, i, r] = z[r]
+                if dZrec.shape[0] > 0:
+                    dZrec[rec, i, r] = z[r] - old[r]
+    return status
+
+
+@njit(**JIT)
+def propagate_matrix(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec):
+    """Advance the N members of (Z, PT) of a linear scene by nsteps steps of h from t0.
+
+    One step matrix (M, Q, s) per step (kernels.linear), applied to every member:
+    z <- M z, p_t <- p_t - (z.Q z / 2 + s). Records every stride-th state (index j is step
+    j*stride, index 0 the start) and, when dZrec is non-empty, the increment z_k - z_(k-1) of
+    the step before each record. Returns (status, k): k steps completed; on failure step
+    k -> k+1 failed and the records hold every recorded state before it.
     """
     D, P, Z, PT, Trec, Zrec, PTrec, dZrec = borrow((D, P, Z, PT, Trec, Zrec, PTrec, dZrec))
     C = coef_table(D, P)
-    W = work(D, P, 0.0)
     LW = lwork(D, P)
     MQ = matrices(P, 2, 0.0)
     M, Q = MQ[0], MQ[1]
     V = vectors(P, 2, 0.0)
     z, old = V[0], V[1]
-    N = Z.shape[0]
     m = 2 * ndof(P)
-    offsets = D.offsets
-    u = len(offsets)
-    can_reuse = u > 1 and offsets[0] == 0.0 and offsets[u - 1] == 1.0
-    increments = dZrec.shape[0] > 0
-    Trec[0] = t0
-    for i in range(N):
-        PTrec[0, i] = PT[i]
-        for r in range(m):
-            Zrec[0, i, r] = Z[i, r]
-            if increments:
-                dZrec[0, i, r] = np.nan
+    u = len(D.offsets)
+    can_reuse = u > 1 and D.offsets[0] == 0.0 and D.offsets[u - 1] == 1.0
+    _record_start(t0, Z, PT, Trec, Zrec, PTrec, dZrec, m)
     rec = 1
-    s = 0.0
     for k in range(nsteps):
         tk = t0 + k * h
-        tk1 = t0 + (k + 1) * h
-        _coefs(P, offsets, tk, tk1, h, C, can_reuse and k > 0)
+        _coefs(P, D.offsets, tk, t0 + (k + 1) * h, h, C, can_reuse and k > 0)
+        s = lmatrix(D, P, C, tk, h, M, Q, LW)
         recording = (k + 1) % stride == 0
-        if is_linear(P):
-            s = lmatrix(D, P, C, tk, h, M, Q, LW)
-        for i in range(N):
+        for i in range(Z.shape[0]):
+            quad = 0.0
             for r in range(m):
                 old[r] = Z[i, r]
-            if is_linear(P):
-                status = OK
-                quad = 0.0
-                for r in range(m):
-                    acc = 0.0
-                    qr = 0.0
-                    for c in range(m):
-                        acc += M[r, c] * old[c]
-                        qr += Q[r, c] * old[c]
-                    z[r] = acc
-                    quad += old[r] * qr
-                pt = PT[i] - (0.5 * quad + s)
-            else:
-                for r in range(m):
-                    z[r] = old[r]
-                status, pt = step(D, P, C, tk, h, z, PT[i], W)
-            if status == OK and not np.isfinite(pt):
-                status = OVERFLOW
             for r in range(m):
-                if not np.isfinite(z[r]):
-                    status = OVERFLOW
+                acc = 0.0
+                qr = 0.0
+                for c in range(m):
+                    acc += M[r, c] * old[c]
+                    qr += Q[r, c] * old[c]
+                z[r] = acc
+                quad += old[r] * qr
+            status = _accept(OK, i, z, old, PT[i] - (0.5 * quad + s), Z, PT, rec, recording, Zrec, PTrec,
+                             dZrec, m)
             if status != OK:
                 return status, k
-            PT[i] = pt
-            for r in range(m):
-                Z[i, r] = z[r]
-            if recording:
-                PTrec[rec, i] = pt
-                for r in range(m):
-                    Zrec[rec, i, r] = z[r]
-                    if increments:
-                        dZrec[rec, i, r] = z[r] - old[r]
         if recording:
-            Trec[rec] = tk1
+            Trec[rec] = t0 + (k + 1) * h
             rec += 1
     return OK, nsteps
 
 
 @njit(**JIT)
-def tangent(D, P, h, T, Z, PT, M):
-    """One-step tangent maps M[k] = d z_(k+1) / d z_k on the time slice t = T[k].
+def propagate_members(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec):
+    """As propagate_matrix, for any scene: each member takes the family's step (Newton where
+    the method is implicit)."""
+    D, P, Z, PT, Trec, Zrec, PTrec, dZrec = borrow((D, P, Z, PT, Trec, Zrec, PTrec, dZrec))
+    C = coef_table(D, P)
+    W = work(D, P, 0.0)
+    V = vectors(P, 2, 0.0)
+    z, old = V[0], V[1]
+    m = 2 * ndof(P)
+    u = len(D.offsets)
+    can_reuse = u > 1 and D.offsets[0] == 0.0 and D.offsets[u - 1] == 1.0
+    _record_start(t0, Z, PT, Trec, Zrec, PTrec, dZrec, m)
+    rec = 1
+    for k in range(nsteps):
+        tk = t0 + k * h
+        _coefs(P, D.offsets, tk, t0 + (k + 1) * h, h, C, can_reuse and k > 0)
+        recording = (k + 1) % stride == 0
+        for i in range(Z.shape[0]):
+            for r in range(m):
+                old[r] = Z[i, r]
+                z[r] = old[r]
+            status, pt = step(D, P, C, tk, h, z, PT[i], W)
+            status = _accept(status, i, z, old, pt, Z, PT, rec, recording, Zrec, PTrec, dZrec, m)
+            if status != OK:
+                return status, k
+        if recording:
+            Trec[rec] = t0 + (k + 1) * h
+            rec += 1
+    return OK, nsteps
 
-    Linear scenes: the step matrix itself. Otherwise by complex step on the member step: exact
-    to round-off (no subtraction).
-    """
+
+@njit(**JIT)
+def tangent_matrix(D, P, h, T, Z, PT, M):
+    """One-step tangent maps M[k] = d z_(k+1) / d z_k at t = T[k] of a linear scene: the step
+    matrix itself."""
+    D, P, T, M = borrow((D, P, T, M))
+    C = coef_table(D, P)
+    LW = lwork(D, P)
+    Q = matrices(P, 1, 0.0)[0]
+    for k in range(T.shape[0]):
+        _coefs(P, D.offsets, T[k], T[k] + h, h, C, False)
+        lmatrix(D, P, C, T[k], h, M[k], Q, LW)
+    return OK, T.shape[0]
+
+
+@njit(**JIT)
+def tangent_complex(D, P, h, T, Z, PT, M):
+    """One-step tangent maps M[k] = d z_(k+1) / d z_k on the time slice t = T[k], by complex
+    step on the member step: exact to round-off (no subtraction)."""
     D, P, T, Z, PT, M = borrow((D, P, T, Z, PT, M))
     C = coef_table(D, P)
     W = work(D, P, 0j)
-    LW = lwork(D, P)
-    Q = matrices(P, 1, 0.0)[0]
     zc = vectors(P, 1, 0j)[0]
     m = 2 * ndof(P)
     for k in range(Z.shape[0]):
         _coefs(P, D.offsets, T[k], T[k] + h, h, C, False)
-        if is_linear(P):
-            lmatrix(D, P, C, T[k], h, M[k], Q, LW)
-            continue
         for j in range(m):
             for r in range(m):
                 zc[r] = Z[k, r]
@@ -133,6 +170,15 @@ def tangent(D, P, h, T, Z, PT, M):
             for r in range(m):
                 M[k, r, j] = zc[r].imag / COMPLEX_STEP
     return OK, Z.shape[0]
+
+
+def propagate(setup):
+    """The compiled loop for a setup's scene: one matrix per step if linear, else members."""
+    return propagate_matrix if setup.scene.kernel.linear else propagate_members
+
+
+def tangent(setup):
+    return tangent_matrix if setup.scene.kernel.linear else tangent_complex
 
 
 @njit(**JIT)

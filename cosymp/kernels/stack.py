@@ -48,8 +48,13 @@ def _scene(P):
     return KERNELS[P.instance_class]
 
 
+MAX_STAGES = 16
+MAX_OFFSETS = 16
+
+
 def _stages(D):
-    return D.types[D.fields.index("b")].count
+    """Stage scratch is sized by a bound, so every tableau of a family shares one compiled loop."""
+    return MAX_STAGES
 
 
 def vectors(P, k, like):
@@ -77,7 +82,7 @@ def stage_square(D, P, like):
 
 
 def coef_table(D, P):
-    """The stack table of time coefficients: one row per time offset of D."""
+    """The stack table of time coefficients: one row per time offset of D (at most MAX_OFFSETS)."""
 
 
 @overload(vectors, jit_options=_SCRATCH, inline="always", prefer_literal=True)
@@ -122,6 +127,5 @@ def _stage_square(D, P, like):
 
 @overload(coef_table, jit_options=_SCRATCH, inline="always")
 def _coef_table(D, P):
-    u = D.types[D.fields.index("offsets")].count
     nc = _scene(P).ncoef
-    return lambda D, P: stack_array((u, nc), 0.0)
+    return lambda D, P: stack_array((MAX_OFFSETS, nc), 0.0)
