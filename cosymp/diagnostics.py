@@ -52,7 +52,7 @@ def det_deviation(M):
 def symplecticity_defect(M):
     """||M^T J M - J||_max per map."""
     Jn = J(M.shape[-1] // 2)
-    return np.max(np.abs(np.einsum("kji,jl,klm->kim", M, Jn, M) - Jn), axis=(1, 2))
+    return np.max(np.abs(np.swapaxes(M, 1, 2) @ (Jn @ M) - Jn), axis=(1, 2))
 
 
 def nearby_states(z0, delta, count):

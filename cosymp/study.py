@@ -55,8 +55,12 @@ class Comparison:
         }
 
 
+CLOUD_SAMPLES = 500
+
+
 def compare(setup, h, T, delta=1e-4, cloud_points=0, cloud_radius=0.05, stride=None, z0=None):
-    """Run `setup` and derive its diagnostics; see Comparison."""
+    """Run `setup` and derive its diagnostics; see Comparison. The cloud is recorded at about
+    CLOUD_SAMPLES times (a multiple of the run's stride)."""
     start = time.perf_counter()
     check_step(h, T)
     base = initial_states(setup, z0)[0]
@@ -67,7 +71,8 @@ def compare(setup, h, T, delta=1e-4, cloud_points=0, cloud_radius=0.05, stride=N
     cloud = None
     area = np.empty(0)
     if cloud_points:
-        cloud = simulate(setup, h, T, z0=ring_states(base, cloud_radius, cloud_points), stride=run.stride)
+        every = run.stride * max(1, run.steps // (run.stride * CLOUD_SAMPLES))
+        cloud = simulate(setup, h, T, z0=ring_states(base, cloud_radius, cloud_points), stride=every)
         area = loop_action(cloud)
         area = area / area[0]
     error = None

@@ -20,7 +20,7 @@ from numba.extending import overload
 from . import cachestamp
 
 cachestamp.install()
-JIT = {"cache": True, "fastmath": {"contract"}, "error_model": "numpy"}
+JIT = {"cache": True, "nogil": True, "fastmath": {"contract"}, "error_model": "numpy"}
 # Everything a step calls is inlined by LLVM (alwaysinline): left as calls, a Hessian or a
 # small solve costs more than the arithmetic of the step.
 INLINE = {**JIT, "forceinline": True}

@@ -1,0 +1,249 @@
+"""`cosymp bench`: ns/step of the numba core next to the same algorithm in plain C -O3.
+
+The C reference (bench_ref.c) mirrors cosymp/kernels and the scenes formula for formula; it is
+compiled here with gcc once per scene, so the ratio numba/C measures the compiled code, not the
+algorithm. Both run the same scene, method, h, initial state and number of steps, recording
+every step, interleaved, and their final states must agree.
+"""
+import ctypes
+import json
+import math
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from .errors import CosympError, InputError
+from .integrate import MAX_RECORDED, Setup, get_scene, initial_states
+from .kernels.families import (
+    NEWTON,
+    OK,
+    OVERFLOW,
+    SINGULAR,
+    Boris,
+    Composition,
+    Exact,
+    Explicit,
+    Gauss,
+    Theta,
+)
+from .kernels.loops import energies, propagate
+from .methods import METHODS
+from .methods import method as get_method
+from .scenes import SCENES
+
+CC = "gcc"
+CFLAGS = ("-O3", "-march=native", "-ffp-contract=fast", "-fno-math-errno", "-fPIC", "-shared")
+TARGET = 1.2
+BUDGET_S = 0.3
+MIN_REPEATS = 3
+AGREE = 1e-9
+STOPPED = {OVERFLOW: "overflow", NEWTON: "Newton did not converge", SINGULAR: "singular Newton matrix"}
+C_PARAMS = {"charged": ("m", "e", "B0", "eps", "w", "C00", "C01", "C11", "d")}
+"""Fields of a scene's parameter tuple the C reference reads, in its struct's order (default: all)."""
+
+
+class _Loop(ctypes.Structure):
+    """bench_ref.c's Loop: propagate's arguments; done receives the steps completed."""
+
+    _fields_ = [("t0", ctypes.c_double), ("h", ctypes.c_double), ("Z", ctypes.c_void_p),
+                ("PT", ctypes.c_void_p), ("N", ctypes.c_long), ("m", ctypes.c_long),
+                ("nsteps", ctypes.c_long), ("stride", ctypes.c_long), ("Trec", ctypes.c_void_p),
+                ("Zrec", ctypes.c_void_p), ("PTrec", ctypes.c_void_p), ("dZrec", ctypes.c_void_p),
+                ("ndz", ctypes.c_long), ("done", ctypes.c_long)]
+
+
+def _f64(values):
+    return np.array(values, dtype=np.float64).ravel()
+
+
+def _family(D):
+    """(FAMILY macro, STAGES, the entry point's A, b, stage, w arrays) for family data D."""
+    if isinstance(D, Explicit):
+        return "EXPLICIT", len(D.b), (_f64(D.A), _f64(D.b), np.array(D.stage, dtype=np.int64), None)
+    if isinstance(D, Gauss):
+        return "GAUSS", len(D.b), (_f64(D.A), _f64(D.b), None, None)
+    if isinstance(D, Theta):
+        return "THETA", 1, (None, None, None, _f64((D.wq0, D.wq1, D.wp0, D.wp1)))
+    if isinstance(D, Composition):
+        return "COMPOSITION", len(D.gammas), (None, None, None, _f64(D.gammas))
+    if isinstance(D, Boris):
+        return "BORIS", 1, (None, None, None, None)
+    if isinstance(D, Exact):
+        return "EXACT", 1, (None, None, None, None)
+    raise CosympError(f"C reference: no mirror of family {type(D).__name__}")
+
+
+def _compile(scene, family, stages, noff, workdir):
+    """bench_ref.c built for one scene and family shape into a shared library in workdir, loaded."""
+    k = scene.kernel
+    lib = Path(workdir) / f"bench_{scene.name}_{family.lower()}_{stages}_{noff}.so"
+    macros = {"SCENE": scene.name.upper(), "NDOF": k.ndof, "NCOEF": k.ncoef, "LINEAR": int(k.linear),
+              "FAMILY": family, "STAGES": stages, "NOFF": noff}
+    with resources.as_file(resources.files("cosymp").joinpath("bench_ref.c")) as path:
+        cmd = [CC, *CFLAGS, *(f"-D{key}={v}" for key, v in macros.items()), "-o", str(lib), str(path),
+               "-lm"]
+        res = subprocess.run(cmd, capture_output=True, text=True, check=False)
+    if res.returncode != 0:
+        raise CosympError(f"compiling the C reference for {scene.name} ({family}) failed: "
+                          f"{' '.join(res.stderr.strip().splitlines()[-1:])}")
+    fn = ctypes.CDLL(str(lib)).run
+    fn.restype = ctypes.c_int
+    return fn
+
+
+class _Runner:
+    """One implementation of one (scene, method) pair: its own state and records, one timed call."""
+
+    def __init__(self, z0, pt0, nsteps):
+        self.z0, self.pt0, self.nsteps = z0, pt0, nsteps
+        N, m = z0.shape
+        self.Z = z0.copy()
+        self.PT = pt0.copy()
+        self.Trec = np.empty(nsteps + 1)
+        self.Zrec = np.empty((nsteps + 1, N, m))
+        self.PTrec = np.empty((nsteps + 1, N))
+        self.dZrec = np.empty((0, N, m))
+        self.status = self.done = None
+
+    def timed(self):
+        """Seconds of one run from the initial state; the result stays in Z, PT, status, done."""
+        self.Z[:] = self.z0
+        self.PT[:] = self.pt0
+        start = time.perf_counter()
+        self.status, self.done = self._run()
+        return time.perf_counter() - start
+
+
+class _Numba(_Runner):
+    def __init__(self, setup, h, z0, pt0, nsteps):
+        super().__init__(z0, pt0, nsteps)
+        self.setup, self.h = setup, h
+
+    def _run(self):
+        return propagate(self.setup.data, self.setup.P, 0.0, self.h, self.Z, self.PT, self.nsteps, 1,
+                         self.Trec, self.Zrec, self.PTrec, self.dZrec)
+
+
+class _C(_Runner):
+    def __init__(self, fn, data, setup, h, z0, pt0, nsteps):
+        super().__init__(z0, pt0, nsteps)
+        fields = C_PARAMS.get(setup.scene.name, setup.P._fields)
+        self.arrays = [_f64([getattr(setup.P, f) for f in fields]), _f64(setup.data.offsets), *data]
+        N, m = z0.shape
+        self.loop = _Loop(0.0, h, self.Z.ctypes.data, self.PT.ctypes.data, N, m, nsteps, 1,
+                          self.Trec.ctypes.data, self.Zrec.ctypes.data, self.PTrec.ctypes.data,
+                          self.dZrec.ctypes.data, 0, 0)
+        self.fn = fn
+        self.args = (ctypes.byref(self.loop),
+                     *(ctypes.c_void_p(None if a is None else a.ctypes.data) for a in self.arrays))
+
+    def _run(self):
+        status = self.fn(*self.args)
+        return status, self.loop.done
+
+
+def _pairs(args):
+    scenes = [get_scene(s) for s in args.scenes] if args.scenes else list(SCENES.values())
+    methods = [get_method(m) for m in args.methods] if args.methods else list(METHODS.values())
+    pairs = [(s, m) for s in scenes for m in methods if m.refusal(s) is None]
+    if not pairs:
+        raise InputError("no method of --methods applies to a scene of --scenes: see 'cosymp methods'")
+    return pairs
+
+
+def _measure(setup, nsteps, reference):
+    """One row: ns/step of numba and C (min over interleaved repeats) and their agreement.
+
+    reference: None, or (the C entry point, its family arrays) for this setup.
+    """
+    h = float(setup.scene.h)
+    z0 = initial_states(setup)
+    H0 = np.empty((1, z0.shape[0]))
+    energies(setup.P, np.zeros(1), z0[None], H0)
+    runners = [_Numba(setup, h, z0, -H0[0], nsteps)]
+    if reference is not None:
+        runners.append(_C(*reference, setup, h, z0, -H0[0], nsteps))
+    for r in runners:
+        r.timed()
+    best = [math.inf] * len(runners)
+    start = time.perf_counter()
+    repeats = 0
+    while repeats < MIN_REPEATS or time.perf_counter() - start < BUDGET_S:
+        for i, r in enumerate(runners):
+            best[i] = min(best[i], r.timed())
+        repeats += 1
+    nb = runners[0]
+    row = {"scene": setup.scene.name, "method": setup.method.name, "steps": int(nb.done),
+           "status": int(nb.status), "numba_ns": 1e9 * best[0] / max(nb.done, 1),
+           "c_ns": None, "ratio": None, "rel_diff": None, "agree": None}
+    if reference is not None:
+        c = runners[1]
+        a = np.concatenate([nb.Z.ravel(), nb.PT])
+        b = np.concatenate([c.Z.ravel(), c.PT])
+        rel = float(np.max(np.abs(a - b)) / max(np.max(np.abs(a)), np.finfo(float).tiny))
+        row["c_ns"] = 1e9 * best[1] / max(c.done, 1)
+        row["ratio"] = row["numba_ns"] / row["c_ns"]
+        row["rel_diff"] = rel
+        row["agree"] = bool(c.status == nb.status and c.done == nb.done and rel < AGREE)
+    return row
+
+
+def _table(rows, out):
+    out.write(f"{'scene':<10} {'method':<17} {'steps':>8} {'numba ns/step':>14} {'C ns/step':>10} "
+              f"{'ratio':>6}\n")
+    for r in rows:
+        c = "" if r["c_ns"] is None else f"{r['c_ns']:.1f}"
+        ratio = "" if r["ratio"] is None else f"{r['ratio']:.2f}"
+        note = []
+        if r["status"] != OK:
+            note.append(f"stopped early: {STOPPED.get(r['status'], r['status'])}")
+        if r["agree"] is False:
+            note.append(f"WARNING: C and numba differ (rel {r['rel_diff']:.1e})")
+        out.write(f"{r['scene']:<10} {r['method']:<17} {r['steps']:>8} {r['numba_ns']:>14.1f} {c:>10} "
+                  f"{ratio:>6}  {'; '.join(note)}".rstrip() + "\n")
+    rated = [r for r in rows if r["ratio"] is not None]
+    if rated:
+        worst = max(rated, key=lambda r: r["ratio"])
+        met = sum(r["ratio"] <= TARGET for r in rated)
+        out.write(f"ratio <= {TARGET} for {met} of {len(rated)} pairs; worst {worst['ratio']:.2f} "
+                  f"({worst['scene']} {worst['method']})\n")
+
+
+def bench(args, out):
+    """Print (or, with args.json, write as a JSON list) one row per scene x applicable method."""
+    if args.steps < 1:
+        raise InputError(f"--steps {args.steps} must be at least 1")
+    pairs = _pairs(args)
+    widest = max(2 * s.ndof + 1 for s, _ in pairs)
+    if (args.steps + 1) * widest > MAX_RECORDED:
+        raise InputError(f"--steps {args.steps} records more than {MAX_RECORDED:.0e} values: "
+                         f"pass at most {MAX_RECORDED // widest - 1}")
+    have_cc = shutil.which(CC) is not None
+    if not have_cc:
+        (sys.stderr if args.json else out).write(
+            f"{CC} not found: numba figures only, no C reference or ratio\n")
+    elif not args.json:
+        out.write(f"C reference: {CC} {' '.join(CFLAGS)}; numba/C ratio target <= {TARGET}\n")
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="cosymp-bench-") as workdir:
+        libs = {}
+        for scene, method in pairs:
+            setup = Setup.make(scene, method)
+            reference = None
+            if have_cc:
+                family, stages, data = _family(setup.data)
+                key = (scene.name, family, stages, len(setup.data.offsets))
+                if key not in libs:
+                    libs[key] = _compile(scene, *key[1:], workdir)
+                reference = libs[key], data
+            rows.append(_measure(setup, args.steps, reference))
+    if args.json:
+        out.write(json.dumps(rows) + "\n")
+    else:
+        _table(rows, out)

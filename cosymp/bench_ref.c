@@ -1,0 +1,931 @@
+/* Plain C mirror of cosymp's numba core, the reference `cosymp bench` measures it against.
+
+   Same formulas, loops and generic dense solve as cosymp/kernels (loops.py, families.py,
+   linear.py, linalg.py) and cosymp/scenes, so a ratio measures the compilers, not the
+   algorithms: linear scenes step by the step's matrix (M, Q, s) built once per step, the
+   others by the family's member step with Newton. One build per scene and family shape:
+
+     -DSCENE=DECAYING|DAMPED|MODULATED|CHARGED|KAPITZA  -DNDOF=n -DNCOEF=k -DLINEAR=0|1
+     -DFAMILY=EXPLICIT|THETA|GAUSS|COMPOSITION|BORIS|EXACT  -DSTAGES=s -DNOFF=u
+
+   Every size numba knows when it compiles (state size, coefficient count, tableau stages,
+   time offsets) is a compile-time constant here too; the family's values (tableau, weights,
+   gammas, offsets) and the scene's parameters arrive at run time and are held by value, as
+   numba holds its tuples. The charged scene is the paper's beta(t) = B0 (1 + eps sin(w t)). */
+#include <math.h>
+#include <string.h>
+
+#define DECAYING 1
+#define DAMPED 2
+#define MODULATED 3
+#define CHARGED 4
+#define KAPITZA 5
+
+#define EXPLICIT 1
+#define THETA 2
+#define GAUSS 3
+#define COMPOSITION 4
+#define BORIS 5
+#define EXACT 6
+
+#if !defined(SCENE) || !defined(NDOF) || !defined(NCOEF) || !defined(LINEAR) || !defined(FAMILY) \
+    || !defined(STAGES) || !defined(NOFF)
+#error "build with -DSCENE -DNDOF -DNCOEF -DLINEAR -DFAMILY -DSTAGES -DNOFF"
+#endif
+
+#define M (2 * NDOF)
+
+enum { OK, OVERFLOW, NEWTON, SINGULAR };
+
+#define NEWTON_MAX 50
+#define NEWTON_TOL 4e-15
+
+/* ---- scenes: the parameter tuple in field order, and the kernel functions; a coefficient
+   row is c = C + r * NCOEF, numba's C[r, :] ---- */
+
+#if SCENE == DECAYING
+typedef struct { double lam; } Params;
+#elif SCENE == DAMPED
+typedef struct { double m, w0, gamma; } Params;
+#elif SCENE == MODULATED
+typedef struct { double eps, alpha; } Params;
+#elif SCENE == CHARGED
+typedef struct { double m, e, B0, eps, w, C00, C01, C11, d; } Params;
+#elif SCENE == KAPITZA
+typedef struct { double w0, a, nu; } Params;
+#else
+#error "unknown SCENE"
+#endif
+
+#if SCENE == KAPITZA
+
+static inline void coef(const Params *P, double t, double *c)
+{
+    c[0] = P->w0 * P->w0 - P->a * P->nu * P->nu * cos(P->nu * t);
+    c[1] = P->a * P->nu * P->nu * P->nu * sin(P->nu * t);
+}
+
+static inline void grad(const double *c, const double *z, double *g)
+{
+    g[0] = c[0] * sin(z[0]);
+    g[1] = z[1];
+}
+
+static inline void hess(const double *c, const double *z, double *Hm)
+{
+    Hm[0] = c[0] * cos(z[0]);
+    Hm[1] = Hm[2] = 0.0;
+    Hm[3] = 1.0;
+}
+
+static inline double dhdt(const double *c, const double *z)
+{
+    return -c[1] * cos(z[0]);
+}
+
+#else /* quadratic scenes (scenes/quadratic.py): c = (S, dS/dt, s, ds/dt), S row-major */
+
+static inline void fill_zero(double *c)
+{
+    for (int i = 0; i < NCOEF; i++)
+        c[i] = 0.0;
+}
+
+static inline double dhdt(const double *c, const double *z)
+{
+    double acc = 0.0 * z[0];
+    for (int i = 0; i < M; i++) {
+        double row = c[M * M + i * M] * z[0];
+        for (int j = 1; j < M; j++)
+            row += c[M * M + i * M + j] * z[j];
+        acc += z[i] * row;
+    }
+    return 0.5 * acc + c[2 * M * M + 1];
+}
+
+#endif
+
+#if SCENE == DECAYING
+
+static inline void coef(const Params *P, double t, double *c)
+{
+    double a = exp(-P->lam * t);
+    fill_zero(c);
+    c[0] = c[3] = a;
+    c[4] = c[7] = -P->lam * a;
+}
+
+#define HAS_FLOW
+static inline void flow(const Params *P, double t0, double t1, double *z)
+{
+    double angle;
+    if (P->lam == 0.0)
+        angle = t1 - t0;
+    else
+        angle = -exp(-P->lam * t0) * expm1(-P->lam * (t1 - t0)) / P->lam;
+    double c = cos(angle);
+    double s = sin(angle);
+    double q = z[0];
+    z[0] = c * q + s * z[1];
+    z[1] = -s * q + c * z[1];
+}
+
+#elif SCENE == DAMPED
+
+static inline void coef(const Params *P, double t, double *c)
+{
+    double grow = exp(P->gamma * t);
+    double kin = grow / P->m;
+    double pot = P->m * P->w0 / grow;
+    fill_zero(c);
+    c[0] = pot;
+    c[3] = kin;
+    c[4] = -P->gamma * pot;
+    c[7] = P->gamma * kin;
+}
+
+#define HAS_FLOW
+static inline void flow(const Params *P, double t0, double t1, double *z)
+{
+    double s = t1 - t0;
+    double W2 = P->w0 - 0.25 * P->gamma * P->gamma;
+    double C, S;
+    if (W2 > 0.0) {
+        double W = sqrt(W2);
+        C = cos(W * s);
+        S = sin(W * s) / W;
+    } else if (W2 < 0.0) {
+        double W = sqrt(-W2);
+        C = cosh(W * s);
+        S = sinh(W * s) / W;
+    } else {
+        C = 1.0;
+        S = s;
+    }
+    double q = z[0], p = z[1];
+    double grow = exp(P->gamma * t0);
+    double half = exp(0.5 * P->gamma * s);
+    z[0] = half * (q * C + (grow * p / P->m - 0.5 * P->gamma * q) * S);
+    z[1] = (p * C + (0.5 * P->gamma * p - P->m * P->w0 * q / grow) * S) / half;
+}
+
+#elif SCENE == MODULATED
+
+static inline void coef(const Params *P, double t, double *c)
+{
+    fill_zero(c);
+    c[0] = 1.0 + P->eps * sin(P->alpha * t);
+    c[3] = 1.0;
+    c[4] = P->eps * P->alpha * cos(P->alpha * t);
+}
+
+#elif SCENE == CHARGED
+
+static inline void coef(const Params *P, double t, double *c)
+{
+    double s = sin(P->w * t);
+    double b0 = P->B0 * (1.0 + P->eps * s);
+    double b1 = P->B0 * P->eps * P->w * cos(P->w * t);
+    double b2 = -P->B0 * P->eps * P->w * P->w * s;
+    const double G[2][2] = {{P->C00, P->C01}, {P->C01, P->C11}};
+    const double Kc[2][2] = {{1.0 + P->C00, -1.0 + P->C01}, {1.0 + P->C01, 1.0 + P->C11}};
+    double inv = 1.0 / P->m;
+    for (int i = 0; i < 2; i++) {
+        for (int j = 0; j < 2; j++) {
+            double LL = 0.0;
+            for (int k = 0; k < 2; k++)
+                LL += Kc[k][i] * Kc[k][j];
+            double e2 = P->e * P->e;
+            c[i * 4 + j] = e2 * b0 * b0 * LL * inv - P->e * b1 * G[i][j];
+            c[16 + i * 4 + j] = 2.0 * e2 * b0 * b1 * LL * inv - P->e * b2 * G[i][j];
+            c[i * 4 + 2 + j] = -P->e * b0 * Kc[j][i] * inv;
+            c[16 + i * 4 + 2 + j] = -P->e * b1 * Kc[j][i] * inv;
+            c[(2 + i) * 4 + j] = -P->e * b0 * Kc[i][j] * inv;
+            c[16 + (2 + i) * 4 + j] = -P->e * b1 * Kc[i][j] * inv;
+            c[(2 + i) * 4 + 2 + j] = i == j ? inv : 0.0;
+            c[16 + (2 + i) * 4 + 2 + j] = 0.0;
+        }
+    }
+    c[32] = -P->e * P->d * b0;
+    c[33] = -P->e * P->d * b1;
+    c[34] = b0;
+    c[35] = b1;
+}
+
+static inline void vecpot(const Params *P, const double *c, const double *q, double *A)
+{
+    A[0] = c[34] * ((1.0 + P->C00) * q[0] + (-1.0 + P->C01) * q[1]);
+    A[1] = c[34] * ((1.0 + P->C01) * q[0] + (1.0 + P->C11) * q[1]);
+}
+
+static inline void efield(const double *c, const double *q, double *E)
+{
+    E[0] = -c[35] * (q[0] - q[1]);
+    E[1] = -c[35] * (q[0] + q[1]);
+}
+
+static inline double bfield(const Params *P, const double *c)
+{
+    return c[34] * ((1.0 + P->C01) - (-1.0 + P->C01));
+}
+
+#endif
+
+/* ---- linalg.solve: the leading n x n block of A (row stride n) against B (n x k, row stride
+   k; k = 1 is a vector); partial pivoting, A destroyed ---- */
+
+static inline int solve(double *A, double *B, int n, int k)
+{
+    for (int c = 0; c < n; c++) {
+        int p = c;
+        double big = fabs(A[c * n + c]);
+        for (int i = c + 1; i < n; i++) {
+            double v = fabs(A[i * n + c]);
+            if (v > big) {
+                big = v;
+                p = i;
+            }
+        }
+        if (big == 0.0)
+            return 0;
+        if (p != c) {
+            for (int j = c; j < n; j++) {
+                double a = A[c * n + j];
+                A[c * n + j] = A[p * n + j];
+                A[p * n + j] = a;
+            }
+            for (int j = 0; j < k; j++) {
+                double b = B[c * k + j];
+                B[c * k + j] = B[p * k + j];
+                B[p * k + j] = b;
+            }
+        }
+        double inv = 1.0 / A[c * n + c];
+        for (int i = c + 1; i < n; i++) {
+            double f = A[i * n + c] * inv;
+            if (f != 0.0) {
+                for (int j = c + 1; j < n; j++)
+                    A[i * n + j] -= f * A[c * n + j];
+                for (int j = 0; j < k; j++)
+                    B[i * k + j] += -f * B[c * k + j];
+            }
+        }
+    }
+    for (int c = n - 1; c >= 0; c--) {
+        for (int j = c + 1; j < n; j++) {
+            double f = -A[c * n + j];
+            for (int x = 0; x < k; x++)
+                B[c * k + x] += f * B[j * k + x];
+        }
+        double f = 1.0 / A[c * n + c];
+        for (int x = 0; x < k; x++)
+            B[c * k + x] *= f;
+    }
+    return 1;
+}
+
+/* ---- the family's data, by value ---- */
+
+typedef struct {
+#if FAMILY == EXPLICIT
+    double A[STAGES * STAGES], b[STAGES];
+    long stage[STAGES];
+#elif FAMILY == GAUSS
+    double A[STAGES * STAGES], b[STAGES];
+#elif FAMILY == THETA
+    double wq0, wq1, wp0, wp1;
+#elif FAMILY == COMPOSITION
+    double gammas[STAGES];
+#endif
+    double offsets[NOFF];
+} Family;
+
+#if !LINEAR
+
+/* ---- member steps (families.py), for scenes that are not quadratic ---- */
+
+/* _newton_done: whether Newton has converged; *prev receives the correction's size. */
+static inline int newton_done(const double *dz, int ndz, const double *z, int nz, double *prev)
+{
+    double size = 1.0;
+    for (int i = 0; i < nz; i++) {
+        double a = fabs(z[i]);
+        size = a > size ? a : size;
+    }
+    double corr = 0.0;
+    for (int i = 0; i < ndz; i++) {
+        double a = fabs(dz[i]);
+        corr = a > corr ? a : corr;
+    }
+    int done = corr <= NEWTON_TOL * size || (corr <= 1e-10 * size && corr >= 0.5 * *prev);
+    *prev = corr;
+    return done;
+}
+
+#if FAMILY == THETA || FAMILY == COMPOSITION
+static inline int theta_core(const Params *P, const double *c, double h, double wq0, double wq1,
+                             double wp0, double wp1, double *z, double *pt)
+{
+    (void)P;
+    double z1[M], Zt[M], g[M], F[M], Hm[M * M], Jm[M * M];
+    for (int i = 0; i < M; i++)
+        z1[i] = z[i];
+    double prev = INFINITY;
+    int status = NEWTON;
+    for (int it = 0; it < NEWTON_MAX; it++) {
+        for (int i = 0; i < NDOF; i++) {
+            Zt[i] = wq0 * z[i] + wq1 * z1[i];
+            Zt[NDOF + i] = wp0 * z[NDOF + i] + wp1 * z1[NDOF + i];
+        }
+        grad(c, Zt, g);
+        hess(c, Zt, Hm);
+        for (int i = 0; i < NDOF; i++) {
+            F[i] = z[i] - z1[i] + h * g[NDOF + i];
+            F[NDOF + i] = z[NDOF + i] - z1[NDOF + i] - h * g[i];
+        }
+        for (int i = 0; i < NDOF; i++) {
+            for (int j = 0; j < M; j++) {
+                double w = j < NDOF ? wq1 : wp1;
+                Jm[i * M + j] = -h * w * Hm[(NDOF + i) * M + j];
+                Jm[(NDOF + i) * M + j] = h * w * Hm[i * M + j];
+            }
+        }
+        for (int i = 0; i < M; i++)
+            Jm[i * M + i] += 1.0;
+        if (!solve(Jm, F, M, 1)) {
+            status = SINGULAR;
+            break;
+        }
+        for (int i = 0; i < M; i++)
+            z1[i] += F[i];
+        if (newton_done(F, M, z1, M, &prev) || LINEAR) {
+            status = OK;
+            break;
+        }
+    }
+    if (status == OK) {
+        for (int i = 0; i < NDOF; i++) {
+            Zt[i] = wq0 * z[i] + wq1 * z1[i];
+            Zt[NDOF + i] = wp0 * z[NDOF + i] + wp1 * z1[NDOF + i];
+        }
+        *pt = *pt - h * dhdt(c, Zt);
+        for (int i = 0; i < M; i++)
+            z[i] = z1[i];
+    }
+    return status;
+}
+#endif
+
+static inline int step(const Family *D, const Params *P, const double *C, double h, double *z,
+                       double *pt)
+{
+#if FAMILY == THETA
+    return theta_core(P, C, h, D->wq0, D->wq1, D->wp0, D->wp1, z, pt);
+#elif FAMILY == COMPOSITION
+    int status = OK;
+    for (int i = 0; i < STAGES; i++) {
+        status = theta_core(P, C + i * NCOEF, D->gammas[i] * h, 0.5, 0.5, 0.5, 0.5, z, pt);
+        if (status != OK)
+            break;
+    }
+    return status;
+#elif FAMILY == EXPLICIT
+    (void)P;
+    const int s = STAGES;
+    double K[STAGES * M], Y[M], g[M];
+    double dpt = 0.0 * *pt;
+    for (int i = 0; i < s; i++) {
+        for (int r = 0; r < M; r++)
+            Y[r] = z[r];
+        for (int j = 0; j < i; j++) {
+            double a = h * D->A[i * s + j];
+            if (a != 0.0)
+                for (int r = 0; r < M; r++)
+                    Y[r] += a * K[j * M + r];
+        }
+        grad(C + D->stage[i] * NCOEF, Y, g);
+        for (int r = 0; r < NDOF; r++) {
+            K[i * M + r] = g[NDOF + r];
+            K[i * M + NDOF + r] = -g[r];
+        }
+        dpt += D->b[i] * dhdt(C + D->stage[i] * NCOEF, Y);
+    }
+    for (int i = 0; i < s; i++) {
+        double bh = h * D->b[i];
+        for (int r = 0; r < M; r++)
+            z[r] += bh * K[i * M + r];
+    }
+    *pt = *pt - h * dpt;
+    return OK;
+#elif FAMILY == GAUSS
+    (void)P;
+    const int s = STAGES, sm = STAGES * M;
+    double Zs[STAGES * M], Fs[STAGES * M], y[M], g[M], F[STAGES * M], Hm[M * M], Jm[sm * sm];
+    for (int i = 0; i < s; i++)
+        for (int r = 0; r < M; r++)
+            Zs[i * M + r] = z[r];
+    double prev = INFINITY;
+    int status = NEWTON;
+    for (int it = 0; it < NEWTON_MAX; it++) {
+        for (int j = 0; j < s; j++) {
+            for (int r = 0; r < M; r++)
+                y[r] = Zs[j * M + r];
+            grad(C + j * NCOEF, y, g);
+            for (int r = 0; r < NDOF; r++) {
+                Fs[j * M + r] = g[NDOF + r];
+                Fs[j * M + NDOF + r] = -g[r];
+            }
+        }
+        for (int i = 0; i < s; i++) {
+            for (int r = 0; r < M; r++) {
+                double acc = z[r] - Zs[i * M + r];
+                for (int j = 0; j < s; j++)
+                    acc += h * D->A[i * s + j] * Fs[j * M + r];
+                F[i * M + r] = acc;
+            }
+        }
+        for (int j = 0; j < s; j++) {
+            for (int r = 0; r < M; r++)
+                y[r] = Zs[j * M + r];
+            hess(C + j * NCOEF, y, Hm);
+            for (int i = 0; i < s; i++) {
+                double a = h * D->A[i * s + j];
+                for (int r = 0; r < NDOF; r++) {
+                    for (int c = 0; c < M; c++) {
+                        Jm[(i * M + r) * sm + j * M + c] = -a * Hm[(NDOF + r) * M + c];
+                        Jm[(i * M + NDOF + r) * sm + j * M + c] = a * Hm[r * M + c];
+                    }
+                }
+            }
+        }
+        for (int r = 0; r < sm; r++)
+            Jm[r * sm + r] += 1.0;
+        if (!solve(Jm, F, sm, 1)) {
+            status = SINGULAR;
+            break;
+        }
+        for (int i = 0; i < s; i++)
+            for (int r = 0; r < M; r++)
+                Zs[i * M + r] += F[i * M + r];
+        if (newton_done(F, sm, z, M, &prev) || LINEAR) {
+            status = OK;
+            break;
+        }
+    }
+    if (status == OK) {
+        double dpt = 0.0 * *pt;
+        for (int j = 0; j < s; j++) {
+            for (int r = 0; r < M; r++)
+                y[r] = Zs[j * M + r];
+            grad(C + j * NCOEF, y, g);
+            double bh = h * D->b[j];
+            for (int r = 0; r < NDOF; r++) {
+                z[r] += bh * g[NDOF + r];
+                z[NDOF + r] -= bh * g[r];
+            }
+            dpt += D->b[j] * dhdt(C + j * NCOEF, y);
+        }
+        *pt = *pt - h * dpt;
+    }
+    return status;
+#else
+#error "this family has no member step for a scene that is not quadratic"
+#endif
+}
+
+#else /* LINEAR */
+
+/* ---- step matrices (linear.py): z' = M z, p_t' = p_t - (z.Q z / 2 + s) ---- */
+
+/* (J S_j)[i, c] with J = [[0, I], [-I, 0]], for the coefficient row c */
+static inline double js(const double *c, int i, int j)
+{
+    return i < NDOF ? c[(NDOF + i) * M + j] : -c[(i - NDOF) * M + j];
+}
+
+static inline double sdot(const double *c, int i, int j)
+{
+    return c[M * M + i * M + j];
+}
+
+static inline double sdot0(const double *c)
+{
+    return c[2 * M * M + 1];
+}
+
+static inline void identity(double *A)
+{
+    for (int i = 0; i < M; i++)
+        for (int c = 0; c < M; c++)
+            A[i * M + c] = i == c ? 1.0 : 0.0;
+}
+
+static inline void zero(double *A)
+{
+    for (int i = 0; i < M * M; i++)
+        A[i] = 0.0;
+}
+
+/* Q += scale * G^T (dS/dt) G, with T an M x M scratch */
+static inline void add_sandwich(double *Q, const double *G, const double *c, double scale, double *T)
+{
+    for (int i = 0; i < M; i++) {
+        for (int j = 0; j < M; j++) {
+            double acc = 0.0;
+            for (int r = 0; r < M; r++)
+                acc += sdot(c, i, r) * G[r * M + j];
+            T[i * M + j] = acc;
+        }
+    }
+    for (int i = 0; i < M; i++) {
+        for (int j = 0; j < M; j++) {
+            double acc = 0.0;
+            for (int r = 0; r < M; r++)
+                acc += G[r * M + i] * T[r * M + j];
+            Q[i * M + j] += scale * acc;
+        }
+    }
+}
+
+#if FAMILY == THETA || FAMILY == COMPOSITION
+/* (I - h J S W1) M = I + h J S W0, N = W0 + W1 M, Q = h N^T S' N; returns s = h s' */
+static inline double theta_matrix(const double *c, double h, double wq0, double wq1, double wp0,
+                                  double wp1, double *Mm, double *Q, double *A, double *N)
+{
+    for (int i = 0; i < M; i++) {
+        for (int j = 0; j < M; j++) {
+            double a = h * js(c, i, j);
+            double d = i == j ? 1.0 : 0.0;
+            A[i * M + j] = d - a * (j < NDOF ? wq1 : wp1);
+            Mm[i * M + j] = d + a * (j < NDOF ? wq0 : wp0);
+        }
+    }
+    solve(A, Mm, M, M);
+    for (int i = 0; i < M; i++) {
+        double w0 = i < NDOF ? wq0 : wp0, w1 = i < NDOF ? wq1 : wp1;
+        for (int j = 0; j < M; j++)
+            N[i * M + j] = w1 * Mm[i * M + j] + (i == j ? w0 : 0.0);
+    }
+    zero(Q);
+    add_sandwich(Q, N, c, h, A);
+    return h * sdot0(c);
+}
+#endif
+
+#if FAMILY == COMPOSITION
+/* (M, Q, s) <- (M1, Q1, s1) after (M, Q, s) */
+static inline double compose(double *Mm, double *Q, double s, const double *M1, const double *Q1,
+                             double s1, double *T)
+{
+    for (int i = 0; i < M; i++) {
+        for (int j = 0; j < M; j++) {
+            double acc = 0.0;
+            for (int r = 0; r < M; r++)
+                acc += Q1[i * M + r] * Mm[r * M + j];
+            T[i * M + j] = acc;
+        }
+    }
+    for (int i = 0; i < M; i++) {
+        for (int j = 0; j < M; j++) {
+            double acc = 0.0;
+            for (int r = 0; r < M; r++)
+                acc += Mm[r * M + i] * T[r * M + j];
+            Q[i * M + j] += acc;
+        }
+    }
+    for (int i = 0; i < M; i++) {
+        for (int j = 0; j < M; j++) {
+            double acc = 0.0;
+            for (int r = 0; r < M; r++)
+                acc += M1[i * M + r] * Mm[r * M + j];
+            T[i * M + j] = acc;
+        }
+    }
+    for (int i = 0; i < M * M; i++)
+        Mm[i] = T[i];
+    return s + s1;
+}
+#endif
+
+#if FAMILY == BORIS
+/* boris_core: drift-kick-drift in (q, v), v = (p - e A) / m, fields at the half step; the
+   half-step state (q, p) is left in zh. */
+static inline double boris_core(const Params *P, const double *C, double h, double *z, double pt,
+                                double *zh)
+{
+    double q[2], v[2], A[2], E[2];
+    double a = P->e * h / (2.0 * P->m);
+    vecpot(P, C, z, A);
+    double v0x = (z[2] - P->e * A[0]) / P->m;
+    double v0y = (z[3] - P->e * A[1]) / P->m;
+    q[0] = z[0] + 0.5 * h * v0x;
+    q[1] = z[1] + 0.5 * h * v0y;
+    efield(C + NCOEF, q, E);
+    double tau = a * bfield(P, C + NCOEF);
+    double sig = 2.0 * tau / (1.0 + tau * tau);
+    double vx = v0x + a * E[0];
+    double vy = v0y + a * E[1];
+    double wx = vx + vy * tau;
+    double wy = vy - vx * tau;
+    vx += wy * sig;
+    vy -= wx * sig;
+    v[0] = vx + a * E[0];
+    v[1] = vy + a * E[1];
+    vecpot(P, C + NCOEF, q, A);
+    zh[0] = q[0];
+    zh[1] = q[1];
+    zh[2] = 0.5 * P->m * (v0x + v[0]) + P->e * A[0];
+    zh[3] = 0.5 * P->m * (v0y + v[1]) + P->e * A[1];
+    pt = pt - h * dhdt(C + NCOEF, zh);
+    z[0] = q[0] + 0.5 * h * v[0];
+    z[1] = q[1] + 0.5 * h * v[1];
+    vecpot(P, C + 2 * NCOEF, z, A);
+    z[2] = P->m * v[0] + P->e * A[0];
+    z[3] = P->m * v[1] + P->e * A[1];
+    return pt;
+}
+#endif
+
+/* lmatrix: the step's (M, Q) from the coefficient rows C; returns s */
+static inline double lmatrix(const Family *D, const Params *P, const double *C, double t, double h,
+                             double *Mm, double *Q)
+{
+#if FAMILY == THETA
+    (void)P;
+    (void)t;
+    double A[M * M], N[M * M];
+    return theta_matrix(C, h, D->wq0, D->wq1, D->wp0, D->wp1, Mm, Q, A, N);
+#elif FAMILY == COMPOSITION
+    (void)P;
+    (void)t;
+    double W0[M * M], W1[M * M], M1[M * M], Q1[M * M], T[M * M];
+    identity(Mm);
+    zero(Q);
+    double s = 0.0;
+    for (int i = 0; i < STAGES; i++) {
+        double s1 = theta_matrix(C + i * NCOEF, D->gammas[i] * h, 0.5, 0.5, 0.5, 0.5, M1, Q1, W0, W1);
+        s = compose(Mm, Q, s, M1, Q1, s1, T);
+    }
+    return s;
+#elif FAMILY == GAUSS
+    (void)P;
+    (void)t;
+    const int s = STAGES, sm = STAGES * M;
+    double V[M * M], Big[sm * sm], G[STAGES * M * M];
+    for (int i = 0; i < s; i++)
+        for (int j = 0; j < s; j++)
+            for (int r = 0; r < M; r++)
+                for (int c = 0; c < M; c++)
+                    Big[(i * M + r) * sm + j * M + c] = (i == j && r == c ? 1.0 : 0.0)
+                        - h * D->A[i * s + j] * js(C + j * NCOEF, r, c);
+    for (int r = 0; r < sm; r++)
+        for (int c = 0; c < M; c++)
+            G[r * M + c] = r % M == c ? 1.0 : 0.0;
+    solve(Big, G, sm, M);
+    identity(Mm);
+    zero(Q);
+    double total = 0.0;
+    for (int j = 0; j < s; j++) {
+        double hb = h * D->b[j];
+        for (int i = 0; i < M; i++) {
+            for (int c = 0; c < M; c++) {
+                double acc = 0.0;
+                for (int r = 0; r < M; r++)
+                    acc += js(C + j * NCOEF, i, r) * G[(j * M + r) * M + c];
+                Mm[i * M + c] += hb * acc;
+            }
+        }
+        add_sandwich(Q, G + j * M * M, C + j * NCOEF, hb, V);
+        total += hb * sdot0(C + j * NCOEF);
+    }
+    return total;
+#elif FAMILY == EXPLICIT
+    (void)P;
+    (void)t;
+    const int s = STAGES;
+    double G[M * M], T[M * M], K[STAGES * M * M];
+    identity(Mm);
+    zero(Q);
+    double total = 0.0;
+    for (int i = 0; i < s; i++) {
+        const double *c = C + D->stage[i] * NCOEF;
+        identity(G);
+        for (int j = 0; j < i; j++) {
+            double a = h * D->A[i * s + j];
+            if (a != 0.0)
+                for (int r = 0; r < M * M; r++)
+                    G[r] += a * K[j * M * M + r];
+        }
+        for (int r = 0; r < M; r++) {
+            for (int x = 0; x < M; x++) {
+                double acc = 0.0;
+                for (int y = 0; y < M; y++)
+                    acc += js(c, r, y) * G[y * M + x];
+                K[(i * M + r) * M + x] = acc;
+            }
+        }
+        double hb = h * D->b[i];
+        for (int r = 0; r < M * M; r++)
+            Mm[r] += hb * K[i * M * M + r];
+        add_sandwich(Q, G, c, hb, T);
+        total += hb * sdot0(c);
+    }
+    return total;
+#elif FAMILY == EXACT
+    (void)D;
+    double S1M[M * M], v[M];
+    for (int c = 0; c < M; c++) {
+        for (int r = 0; r < M; r++)
+            v[r] = r == c ? 1.0 : 0.0;
+        flow(P, t, t + h, v);
+        for (int r = 0; r < M; r++)
+            Mm[r * M + c] = v[r];
+    }
+    for (int i = 0; i < M; i++) {
+        for (int c = 0; c < M; c++) {
+            double acc = 0.0;
+            for (int r = 0; r < M; r++)
+                acc += C[NCOEF + i * M + r] * Mm[r * M + c];
+            S1M[i * M + c] = acc;
+        }
+    }
+    for (int i = 0; i < M; i++) {
+        for (int c = 0; c < M; c++) {
+            double acc = 0.0;
+            for (int r = 0; r < M; r++)
+                acc += Mm[r * M + i] * S1M[r * M + c];
+            Q[i * M + c] = acc - C[i * M + c];
+        }
+    }
+    return C[NCOEF + 2 * M * M] - C[2 * M * M];
+#elif FAMILY == BORIS
+    (void)D;
+    (void)t;
+    double N[M * M], T[M * M], v[M], zh[M];
+    for (int c = 0; c < M; c++) {
+        for (int r = 0; r < M; r++)
+            v[r] = r == c ? 1.0 : 0.0;
+        boris_core(P, C, h, v, 0.0, zh);
+        for (int r = 0; r < M; r++) {
+            Mm[r * M + c] = v[r];
+            N[r * M + c] = zh[r];
+        }
+    }
+    zero(Q);
+    add_sandwich(Q, N, C + NCOEF, h, T);
+    return h * sdot0(C + NCOEF);
+#else
+#error "unknown FAMILY"
+#endif
+}
+
+#endif /* LINEAR */
+
+/* ---- loops.propagate ---- */
+
+/* propagate's arguments; done receives the steps completed */
+typedef struct {
+    double t0, h;
+    double *Z, *PT;
+    long N, m, nsteps, stride;
+    double *Trec, *Zrec, *PTrec, *dZrec;
+    long ndz; /* rows of dZrec: 0 records no increments */
+    long done;
+} Loop;
+
+static inline void coefs(const Params *P, const double *offsets, double tk, double tk1, double h,
+                         double *C, int reuse)
+{
+    for (int j = 0; j < NOFF; j++) {
+        if (j == 0 && reuse)
+            for (int c = 0; c < NCOEF; c++)
+                C[c] = C[(NOFF - 1) * NCOEF + c];
+        else
+            coef(P, offsets[j] == 1.0 ? tk1 : tk + offsets[j] * h, C + j * NCOEF);
+    }
+}
+
+static int propagate(const Family *D, const Params *P, Loop *L)
+{
+    double t0 = L->t0, h = L->h;
+    double *Z = L->Z, *PT = L->PT, *Trec = L->Trec, *Zrec = L->Zrec, *PTrec = L->PTrec;
+    double *dZrec = L->dZrec;
+    long N = L->N, ld = L->m, nsteps = L->nsteps, stride = L->stride;
+    double C[NOFF * NCOEF], z[M], old[M];
+#if LINEAR
+    double Mm[M * M], Q[M * M];
+#endif
+    int can_reuse = NOFF > 1 && D->offsets[0] == 0.0 && D->offsets[NOFF - 1] == 1.0;
+    int increments = L->ndz > 0;
+    Trec[0] = t0;
+    for (long i = 0; i < N; i++) {
+        PTrec[i] = PT[i];
+        for (int r = 0; r < M; r++) {
+            Zrec[i * ld + r] = Z[i * ld + r];
+            if (increments)
+                dZrec[i * ld + r] = NAN;
+        }
+    }
+    long rec = 1;
+    double s = 0.0;
+    for (long k = 0; k < nsteps; k++) {
+        double tk = t0 + k * h;
+        double tk1 = t0 + (k + 1) * h;
+        coefs(P, D->offsets, tk, tk1, h, C, can_reuse && k > 0);
+        int recording = (k + 1) % stride == 0;
+#if LINEAR
+        s = lmatrix(D, P, C, tk, h, Mm, Q);
+#endif
+        for (long i = 0; i < N; i++) {
+            for (int r = 0; r < M; r++)
+                old[r] = Z[i * ld + r];
+#if LINEAR
+            int status = OK;
+            double quad = 0.0;
+            for (int r = 0; r < M; r++) {
+                double acc = 0.0, qr = 0.0;
+                for (int c = 0; c < M; c++) {
+                    acc += Mm[r * M + c] * old[c];
+                    qr += Q[r * M + c] * old[c];
+                }
+                z[r] = acc;
+                quad += old[r] * qr;
+            }
+            double pt = PT[i] - (0.5 * quad + s);
+#else
+            (void)s;
+            for (int r = 0; r < M; r++)
+                z[r] = old[r];
+            double pt = PT[i];
+            int status = step(D, P, C, h, z, &pt);
+#endif
+            if (status == OK && !isfinite(pt))
+                status = OVERFLOW;
+            for (int r = 0; r < M; r++)
+                if (!isfinite(z[r]))
+                    status = OVERFLOW;
+            if (status != OK) {
+                L->done = k;
+                return status;
+            }
+            PT[i] = pt;
+            for (int r = 0; r < M; r++)
+                Z[i * ld + r] = z[r];
+            if (recording) {
+                PTrec[rec * N + i] = pt;
+                for (int r = 0; r < M; r++) {
+                    Zrec[(rec * N + i) * ld + r] = z[r];
+                    if (increments)
+                        dZrec[(rec * N + i) * ld + r] = z[r] - old[r];
+                }
+            }
+        }
+        if (recording) {
+            Trec[rec] = tk1;
+            rec += 1;
+        }
+    }
+    L->done = nsteps;
+    return OK;
+}
+
+/* ---- the entry point: family values and scene parameters copied in by value ---- */
+
+int run(Loop *L, const double *params, const double *offsets, const double *A, const double *b,
+        const long *stage, const double *w)
+{
+    Params P;
+    Family D;
+    memcpy(&P, params, sizeof P);
+    memcpy(D.offsets, offsets, sizeof D.offsets);
+#if FAMILY == EXPLICIT
+    memcpy(D.A, A, sizeof D.A);
+    memcpy(D.b, b, sizeof D.b);
+    memcpy(D.stage, stage, sizeof D.stage);
+    (void)w;
+#elif FAMILY == GAUSS
+    memcpy(D.A, A, sizeof D.A);
+    memcpy(D.b, b, sizeof D.b);
+    (void)stage;
+    (void)w;
+#elif FAMILY == THETA
+    D.wq0 = w[0];
+    D.wq1 = w[1];
+    D.wp0 = w[2];
+    D.wp1 = w[3];
+    (void)A;
+    (void)b;
+    (void)stage;
+#elif FAMILY == COMPOSITION
+    memcpy(D.gammas, w, sizeof D.gammas);
+    (void)A;
+    (void)b;
+    (void)stage;
+#else
+    (void)A;
+    (void)b;
+    (void)stage;
+    (void)w;
+#endif
+    return propagate(&D, &P, L);
+}
