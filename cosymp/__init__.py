@@ -9,5 +9,14 @@ from .integrate import MAX_STEPS, Setup, Trajectory, simulate
 from .methods import METHODS
 from .scenes import SCENES
 
-__all__ = ["CosympError", "InputError", "RunError", "MAX_STEPS", "Setup", "Trajectory", "simulate",
-           "METHODS", "SCENES"]
+__all__ = [
+           "MAX_STEPS",
+           "METHODS",
+           "SCENES",
+           "CosympError",
+           "InputError",
+           "RunError",
+           "Setup",
+           "Trajectory",
+           "simulate",
+]

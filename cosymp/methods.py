@@ -3,9 +3,9 @@
 Every method acts on the extended state (q, t, p, p_t); t advances by exactly h per step.
 """
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cache
-from typing import Callable
 
 import numpy as np
 

@@ -9,9 +9,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .diagnostics import (det_deviation, loop_action, nearby_states, paper_symplectic_form,
-                          paper_volume_form, ring_states, separation_omega, symplecticity_defect,
-                          tangent_maps)
+from .diagnostics import (
+    det_deviation,
+    loop_action,
+    nearby_states,
+    paper_symplectic_form,
+    paper_volume_form,
+    ring_states,
+    separation_omega,
+    symplecticity_defect,
+    tangent_maps,
+)
 from .integrate import Setup, check_step, initial_states, simulate
 from .scenes import charged
 

@@ -28,7 +28,8 @@ def test_run_json_contract_damped_against_exact_flow():
     assert FIELDS <= set(res)
     assert res["steps"] == 500 and res["t_final"] == pytest.approx(50.0)
     assert len(res["q_final"]) == 1 and len(res["p_final"]) == 1
-    assert res["det_max_dev"] < 1e-13 and res["symp_max_dev"] < 1e-13
+    # round-off in M^T J M grows with |M|^2, and |M| reaches ~ h e^{gamma T} = 2e3 here
+    assert res["det_max_dev"] < 1e-11 and res["symp_max_dev"] < 1e-11
     assert 1e-4 < res["error_final"] < 10
     assert res["reference"] == "exact flow"
 
@@ -89,7 +90,7 @@ BAD = [
 
 @pytest.mark.parametrize("argv,words", BAD, ids=[" ".join(a) for a, _ in BAD])
 def test_bad_input_exits_2_with_one_line(argv, words):
-    code, out, err = run_cli(*argv)
+    code, _out, err = run_cli(*argv)
     assert code == 2
     assert err.startswith("cosymp: ") and err.count("\n") == 1, err
     assert words in err
@@ -108,6 +109,6 @@ def test_run_failure_exits_3_with_time():
 
 def test_console_entry_point_in_fresh_process():
     """python -m cosymp: no traceback reaches the user on bad input."""
-    r = subprocess.run([sys.executable, "-m", "cosymp", "run", "damped", "--h", "-1"], capture_output=True,
-                       text=True, timeout=120)
+    r = subprocess.run([sys.executable, "-m", "cosymp", "run", "damped", "--h", "-1"], check=False,
+                       capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "Traceback" not in r.stderr

@@ -3,8 +3,16 @@ import numpy as np
 import pytest
 from conftest import setup
 
-from cosymp.diagnostics import (det_deviation, loop_action, nearby_states, paper_symplectic_form,
-                                paper_volume_form, ring_states, separation_omega, tangent_maps)
+from cosymp.diagnostics import (
+    det_deviation,
+    loop_action,
+    nearby_states,
+    paper_symplectic_form,
+    paper_volume_form,
+    ring_states,
+    separation_omega,
+    tangent_maps,
+)
 from cosymp.integrate import initial_states, simulate
 from cosymp.reference import reference_final, scipy_reference
 

@@ -40,6 +40,17 @@ def identity(A, m):
 
 
 @njit(**INLINE)
+def product(A, B, out, m, transpose_a=False, scale=1.0, add=False):
+    """out (+)= scale * A B, or scale * A^T B, for m x m matrices."""
+    for i in range(m):
+        for c in range(m):
+            acc = 0.0
+            for r in range(m):
+                acc += (A[r, i] if transpose_a else A[i, r]) * B[r, c]
+            out[i, c] = out[i, c] + scale * acc if add else scale * acc
+
+
+@njit(**INLINE)
 def add_sandwich(Q, G, C, j, m, scale, T):
     """Q += scale * G^T (dS/dt)_j G, with T an m x m scratch."""
     for i in range(m):
@@ -48,12 +59,7 @@ def add_sandwich(Q, G, C, j, m, scale, T):
             for r in range(m):
                 acc += sdot(C, j, m, i, r) * G[r, c]
             T[i, c] = acc
-    for i in range(m):
-        for c in range(m):
-            acc = 0.0
-            for r in range(m):
-                acc += G[r, i] * T[r, c]
-            Q[i, c] += scale * acc
+    product(G, T, Q, m, transpose_a=True, scale=scale, add=True)
 
 
 @njit(**INLINE)
@@ -82,24 +88,9 @@ def theta_matrix(P, C, j, h, wq0, wq1, wp0, wp1, M, Q, A, N):
 @njit(**INLINE)
 def compose(M, Q, s, M1, Q1, s1, m, T):
     """(M, Q, s) <- (M1, Q1, s1) after (M, Q, s)."""
-    for i in range(m):
-        for c in range(m):
-            acc = 0.0
-            for r in range(m):
-                acc += Q1[i, r] * M[r, c]
-            T[i, c] = acc
-    for i in range(m):
-        for c in range(m):
-            acc = 0.0
-            for r in range(m):
-                acc += M[r, i] * T[r, c]
-            Q[i, c] += acc
-    for i in range(m):
-        for c in range(m):
-            acc = 0.0
-            for r in range(m):
-                acc += M1[i, r] * M[r, c]
-            T[i, c] = acc
+    product(Q1, M, T, m)
+    product(M, T, Q, m, transpose_a=True, add=True)
+    product(M1, M, T, m)
     for i in range(m):
         for c in range(m):
             M[i, c] = T[i, c]
@@ -241,12 +232,10 @@ def exact_lmatrix(D, P, C, t, h, M, Q, W):
             for r in range(m):
                 acc += C[1, i * m + r] * M[r, c]
             S1M[i, c] = acc
+    product(M, S1M, Q, m, transpose_a=True)
     for i in range(m):
         for c in range(m):
-            acc = 0.0
-            for r in range(m):
-                acc += M[r, i] * S1M[r, c]
-            Q[i, c] = acc - C[0, i * m + c]
+            Q[i, c] -= C[0, i * m + c]
     return C[1, 2 * m * m] - C[0, 2 * m * m]
 
 

@@ -6,8 +6,8 @@ registers (measured: the theta step's matrices in 6.8 ns instead of 22.8 ns on t
 A stack array lives as long as the compiled function that declares it; all kernels inline
 their callees in numba's IR, so the declaring function is always the loop itself.
 """
-import llvmlite.ir as ir
 import numpy as np
+from llvmlite import ir
 from numba.core import cgutils, types
 from numba.core.errors import TypingError
 from numba.extending import intrinsic, overload

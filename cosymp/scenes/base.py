@@ -1,7 +1,7 @@
 """What a scene is: parameters with defaults, bounds and docs, equations, and its jitted core."""
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 

@@ -213,10 +213,10 @@ SCENE = ChargedScene(
              "order for per-gauge runs, to round-off for transported maps); the canonical "
              "momentum p does not. Boris gives the same q and Pi in every gauge.",
     equations=(r"H = \frac{1}{2m}\big|p - eA(q,t)\big|^2 + e\,\phi(q,t)",
-               r"A = \beta(t)\,(x-y,\;x+y),\quad \phi = 0,\quad B = 2\beta(t)\,e_z,\quad "
-               r"E = -\dot\beta(t)\,(x-y,\;x+y)",
-               r"A' = A + \nabla\chi,\quad \phi' = \phi - \partial_t\chi,\quad "
-               r"G_\chi(q,p,t,p_t) = (q,\,p+e\nabla\chi,\,t,\,p_t+e\,\partial_t\chi)",
+               (r"A = \beta(t)\,(x-y,\;x+y),\quad \phi = 0,\quad B = 2\beta(t)\,e_z,\quad "
+               r"E = -\dot\beta(t)\,(x-y,\;x+y)"),
+               (r"A' = A + \nabla\chi,\quad \phi' = \phi - \partial_t\chi,\quad "
+               r"G_\chi(q,p,t,p_t) = (q,\,p+e\nabla\chi,\,t,\,p_t+e\,\partial_t\chi)"),
                r"\beta(t) = B_0\,(1+\varepsilon\sin\omega t)"),
     params=(
         Param("m", 1.0, "mass m", (1e-3, 1e3)),

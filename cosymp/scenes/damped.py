@@ -59,8 +59,8 @@ SCENE = Scene(
              "like e^{-gamma t/2}; gamma < 0 is the usual damping of q. H + p_t oscillates "
              "boundedly for the structure-preserving methods and drifts for RK4 over long runs.",
     equations=(r"H(q,p,t) = \frac{e^{\gamma t}}{2m}\,p^2 + \frac{m\,\omega_0}{2}\,e^{-\gamma t} q^2",
-               r"\dot q = \frac{e^{\gamma t}}{m} p,\quad \dot p = -m\omega_0 e^{-\gamma t} q,\quad "
-               r"\dot p_t = -\frac{\gamma e^{\gamma t}}{2m}p^2 + \frac{\gamma m\omega_0}{2} e^{-\gamma t} q^2",
+               (r"\dot q = \frac{e^{\gamma t}}{m} p,\quad \dot p = -m\omega_0 e^{-\gamma t} q,\quad "
+               r"\dot p_t = -\frac{\gamma e^{\gamma t}}{2m}p^2 + \frac{\gamma m\omega_0}{2} e^{-\gamma t} q^2"),
                r"\ddot q - \gamma\,\dot q + \omega_0\, q = 0"),
     params=(
         Param("m", 1.0, "mass m", (1e-3, 1e3)),
@@ -77,7 +77,7 @@ SCENE = Scene(
     h=0.1,
     T=50.0,
     time_scale=1.0,
-    notes=("Printed sign kept: the usual Caldirola-Kanai damping has the exponentials the other "
-           "way round, i.e. gamma -> -gamma here.",
+    notes=(("Printed sign kept: the usual Caldirola-Kanai damping has the exponentials the other "
+           "way round, i.e. gamma -> -gamma here."),
            "Volume-form run in the paper: gamma = 2e-4, T = 5e5."),
 )

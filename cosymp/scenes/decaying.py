@@ -41,8 +41,8 @@ SCENE = Scene(
     look_for="Explicit Euler's one-step determinant is 1 + h^2 e^{-2t_k} > 1: the orbit spirals "
              "out. Structure-preserving methods keep det = 1 and stay on the exact circle's scale.",
     equations=(r"H(q,p,t) = \tfrac12 e^{-\lambda t}\,(p^2+q^2)",
-               r"\dot q = e^{-\lambda t} p,\quad \dot p = -e^{-\lambda t} q,\quad "
-               r"\dot p_t = \tfrac{\lambda}{2} e^{-\lambda t}(p^2+q^2)",
+               (r"\dot q = e^{-\lambda t} p,\quad \dot p = -e^{-\lambda t} q,\quad "
+               r"\dot p_t = \tfrac{\lambda}{2} e^{-\lambda t}(p^2+q^2)"),
                r"\Phi_{t_k,h} = R\big((e^{-\lambda t_k}-e^{-\lambda (t_k+h)})/\lambda\big)"),
     params=(
         Param("lam", 1.0, "decay rate lambda of the Hamiltonian (the paper's example: 1)", (0.0, 10.0)),

@@ -28,8 +28,8 @@ SCENE = Scene(
              "oscillating around 0; RK4's H + p_t drifts away over the long (2e5) horizon. "
              "Large eps with alpha near 2 (or 1, 2/3, ...) puts it in a Mathieu resonance tongue.",
     equations=(r"H(q,p,t) = \tfrac12\big((1+\varepsilon\sin\alpha t)\,q^2 + p^2\big)",
-               r"\dot q = p,\quad \dot p = -(1+\varepsilon\sin\alpha t)\,q,\quad "
-               r"\dot p_t = -\tfrac12\alpha\varepsilon\cos(\alpha t)\,q^2"),
+               (r"\dot q = p,\quad \dot p = -(1+\varepsilon\sin\alpha t)\,q,\quad "
+               r"\dot p_t = -\tfrac12\alpha\varepsilon\cos(\alpha t)\,q^2")),
     params=(
         Param("eps", 0.0035, "modulation depth eps of the stiffness", (-10.0, 10.0)),
         Param("alpha", 0.0008, "modulation frequency alpha", (0.0, 100.0)),
