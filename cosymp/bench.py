@@ -63,38 +63,44 @@ def _f64(values):
 
 
 def _family(D):
-    """(FAMILY macro, STAGES, the entry point's A, b, stage, w arrays) for family data D."""
+    """The C entry point for family data D, and D as that entry point takes it after offsets."""
     if isinstance(D, Explicit):
-        return "EXPLICIT", len(D.b), (_f64(D.A), _f64(D.b), np.array(D.stage, dtype=np.int64), None)
+        return "run_explicit", (_f64(D.A), _f64(D.b), np.array(D.stage, dtype=np.int64), len(D.b))
     if isinstance(D, Gauss):
-        return "GAUSS", len(D.b), (_f64(D.A), _f64(D.b), None, None)
+        return "run_gauss", (_f64(D.A), _f64(D.b), len(D.b))
     if isinstance(D, Theta):
-        return "THETA", 1, (None, None, None, _f64((D.wq0, D.wq1, D.wp0, D.wp1)))
+        return "run_theta", (float(D.wq0), float(D.wq1), float(D.wp0), float(D.wp1))
     if isinstance(D, Composition):
-        return "COMPOSITION", len(D.gammas), (None, None, None, _f64(D.gammas))
+        return "run_composition", (_f64(D.gammas), len(D.gammas))
     if isinstance(D, Boris):
-        return "BORIS", 1, (None, None, None, None)
+        return "run_boris", ()
     if isinstance(D, Exact):
-        return "EXACT", 1, (None, None, None, None)
+        return "run_exact", ()
     raise CosympError(f"C reference: no mirror of family {type(D).__name__}")
 
 
-def _compile(scene, family, stages, noff, workdir):
-    """bench_ref.c built for one scene and family shape into a shared library in workdir, loaded."""
+def _c_arg(v):
+    """A ctypes argument: an array by address, an int as long, a float as double."""
+    if isinstance(v, np.ndarray):
+        return ctypes.c_void_p(v.ctypes.data)
+    if isinstance(v, int):
+        return ctypes.c_long(v)
+    return ctypes.c_double(v)
+
+
+def _compile(scene, workdir):
+    """bench_ref.c built for one scene into a shared library in workdir, loaded."""
     k = scene.kernel
-    lib = Path(workdir) / f"bench_{scene.name}_{family.lower()}_{stages}_{noff}.so"
-    macros = {"SCENE": scene.name.upper(), "NDOF": k.ndof, "NCOEF": k.ncoef, "LINEAR": int(k.linear),
-              "FAMILY": family, "STAGES": stages, "NOFF": noff}
+    lib = Path(workdir) / f"bench_{scene.name}.so"
+    macros = {"SCENE": scene.name.upper(), "NDOF": k.ndof, "NCOEF": k.ncoef, "LINEAR": int(k.linear)}
     with resources.as_file(resources.files("cosymp").joinpath("bench_ref.c")) as path:
         cmd = [CC, *CFLAGS, *(f"-D{key}={v}" for key, v in macros.items()), "-o", str(lib), str(path),
                "-lm"]
         res = subprocess.run(cmd, capture_output=True, text=True, check=False)
     if res.returncode != 0:
-        raise CosympError(f"compiling the C reference for {scene.name} ({family}) failed: "
+        raise CosympError(f"compiling the C reference for '{scene.name}' failed: "
                           f"{' '.join(res.stderr.strip().splitlines()[-1:])}")
-    fn = ctypes.CDLL(str(lib)).run
-    fn.restype = ctypes.c_int
-    return fn
+    return ctypes.CDLL(str(lib))
 
 
 class _Runner:
@@ -124,24 +130,28 @@ class _Numba(_Runner):
     def __init__(self, setup, h, z0, pt0, nsteps):
         super().__init__(z0, pt0, nsteps)
         self.setup, self.h = setup, h
+        self.kernel = propagate(setup)
 
     def _run(self):
-        return propagate(self.setup.data, self.setup.P, 0.0, self.h, self.Z, self.PT, self.nsteps, 1,
-                         self.Trec, self.Zrec, self.PTrec, self.dZrec)
+        return self.kernel(self.setup.data, self.setup.P, 0.0, self.h, self.Z, self.PT, self.nsteps, 1,
+                           self.Trec, self.Zrec, self.PTrec, self.dZrec)
 
 
 class _C(_Runner):
-    def __init__(self, fn, data, setup, h, z0, pt0, nsteps):
+    def __init__(self, lib, setup, h, z0, pt0, nsteps):
         super().__init__(z0, pt0, nsteps)
+        name, data = _family(setup.data)
         fields = C_PARAMS.get(setup.scene.name, setup.P._fields)
-        self.arrays = [_f64([getattr(setup.P, f) for f in fields]), _f64(setup.data.offsets), *data]
+        values = (_f64([getattr(setup.P, f) for f in fields]), _f64(setup.data.offsets))
+        values += (len(values[1]), *data)
         N, m = z0.shape
         self.loop = _Loop(0.0, h, self.Z.ctypes.data, self.PT.ctypes.data, N, m, nsteps, 1,
                           self.Trec.ctypes.data, self.Zrec.ctypes.data, self.PTrec.ctypes.data,
                           self.dZrec.ctypes.data, 0, 0)
-        self.fn = fn
-        self.args = (ctypes.byref(self.loop),
-                     *(ctypes.c_void_p(None if a is None else a.ctypes.data) for a in self.arrays))
+        self.fn = getattr(lib, name)
+        self.fn.restype = ctypes.c_int
+        self.values = values  # the arrays the C reads stay alive with the runner
+        self.args = (ctypes.byref(self.loop), *(_c_arg(v) for v in values))
 
     def _run(self):
         status = self.fn(*self.args)
@@ -157,18 +167,18 @@ def _pairs(args):
     return pairs
 
 
-def _measure(setup, nsteps, reference):
+def _measure(setup, nsteps, lib):
     """One row: ns/step of numba and C (min over interleaved repeats) and their agreement.
 
-    reference: None, or (the C entry point, its family arrays) for this setup.
+    lib: None, or the C reference built for the setup's scene.
     """
     h = float(setup.scene.h)
     z0 = initial_states(setup)
     H0 = np.empty((1, z0.shape[0]))
     energies(setup.P, np.zeros(1), z0[None], H0)
     runners = [_Numba(setup, h, z0, -H0[0], nsteps)]
-    if reference is not None:
-        runners.append(_C(*reference, setup, h, z0, -H0[0], nsteps))
+    if lib is not None:
+        runners.append(_C(lib, setup, h, z0, -H0[0], nsteps))
     for r in runners:
         r.timed()
     best = [math.inf] * len(runners)
@@ -182,7 +192,7 @@ def _measure(setup, nsteps, reference):
     row = {"scene": setup.scene.name, "method": setup.method.name, "steps": int(nb.done),
            "status": int(nb.status), "numba_ns": 1e9 * best[0] / max(nb.done, 1),
            "c_ns": None, "ratio": None, "rel_diff": None, "agree": None}
-    if reference is not None:
+    if lib is not None:
         c = runners[1]
         a = np.concatenate([nb.Z.ravel(), nb.PT])
         b = np.concatenate([c.Z.ravel(), c.PT])
@@ -234,15 +244,9 @@ def bench(args, out):
     with tempfile.TemporaryDirectory(prefix="cosymp-bench-") as workdir:
         libs = {}
         for scene, method in pairs:
-            setup = Setup.make(scene, method)
-            reference = None
-            if have_cc:
-                family, stages, data = _family(setup.data)
-                key = (scene.name, family, stages, len(setup.data.offsets))
-                if key not in libs:
-                    libs[key] = _compile(scene, *key[1:], workdir)
-                reference = libs[key], data
-            rows.append(_measure(setup, args.steps, reference))
+            if have_cc and scene.name not in libs:
+                libs[scene.name] = _compile(scene, workdir)
+            rows.append(_measure(Setup.make(scene, method), args.steps, libs.get(scene.name)))
     if args.json:
         out.write(json.dumps(rows) + "\n")
     else:

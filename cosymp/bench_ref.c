@@ -2,18 +2,18 @@
 
    Same formulas, loops and generic dense solve as cosymp/kernels (loops.py, families.py,
    linear.py, linalg.py) and cosymp/scenes, so a ratio measures the compilers, not the
-   algorithms: linear scenes step by the step's matrix (M, Q, s) built once per step, the
-   others by the family's member step with Newton. One build per scene and family shape:
+   algorithms: linear scenes step by the step's matrix (M, Q, s) built once per step
+   (propagate_matrix), the others by the family's member step with Newton (propagate_members).
+   One build per scene, one entry point per family:
 
      -DSCENE=DECAYING|DAMPED|MODULATED|CHARGED|KAPITZA  -DNDOF=n -DNCOEF=k -DLINEAR=0|1
-     -DFAMILY=EXPLICIT|THETA|GAUSS|COMPOSITION|BORIS|EXACT  -DSTAGES=s -DNOFF=u
 
-   Every size numba knows when it compiles (state size, coefficient count, tableau stages,
-   time offsets) is a compile-time constant here too; the family's values (tableau, weights,
-   gammas, offsets) and the scene's parameters arrive at run time and are held by value, as
-   numba holds its tuples. The charged scene is the paper's beta(t) = B0 (1 + eps sin(w t)). */
+   The sizes numba knows when it compiles (state size, coefficient count) are compile-time
+   constants here too; the family's data (tableau, weights, gammas, offsets, and so the number
+   of stages and offsets) arrive at run time as arrays, as numba receives them. Scene parameters
+   are held by value, as numba holds its named tuple. The charged scene is the paper's
+   beta(t) = B0 (1 + eps sin(w t)). */
 #include <math.h>
-#include <string.h>
 
 #define DECAYING 1
 #define DAMPED 2
@@ -21,21 +21,17 @@
 #define CHARGED 4
 #define KAPITZA 5
 
-#define EXPLICIT 1
-#define THETA 2
-#define GAUSS 3
-#define COMPOSITION 4
-#define BORIS 5
-#define EXACT 6
-
-#if !defined(SCENE) || !defined(NDOF) || !defined(NCOEF) || !defined(LINEAR) || !defined(FAMILY) \
-    || !defined(STAGES) || !defined(NOFF)
-#error "build with -DSCENE -DNDOF -DNCOEF -DLINEAR -DFAMILY -DSTAGES -DNOFF"
+#if !defined(SCENE) || !defined(NDOF) || !defined(NCOEF) || !defined(LINEAR)
+#error "build with -DSCENE -DNDOF -DNCOEF -DLINEAR"
 #endif
 
 #define M (2 * NDOF)
 
+/* numba compiles every kernel function force-inlined into its loop (kernels.dispatch.INLINE) */
+#define INLINE static inline __attribute__((always_inline))
+
 enum { OK, OVERFLOW, NEWTON, SINGULAR };
+enum { EXPLICIT, THETA, GAUSS, COMPOSITION, BORIS, EXACT };
 
 #define NEWTON_MAX 50
 #define NEWTON_TOL 4e-15
@@ -59,39 +55,52 @@ typedef struct { double w0, a, nu; } Params;
 
 #if SCENE == KAPITZA
 
-static inline void coef(const Params *P, double t, double *c)
+INLINE void coef(const Params *P, double t, double *c)
 {
     c[0] = P->w0 * P->w0 - P->a * P->nu * P->nu * cos(P->nu * t);
     c[1] = P->a * P->nu * P->nu * P->nu * sin(P->nu * t);
 }
 
-static inline void grad(const double *c, const double *z, double *g)
+INLINE void grad(const double *c, const double *z, double *g)
 {
     g[0] = c[0] * sin(z[0]);
     g[1] = z[1];
 }
 
-static inline void hess(const double *c, const double *z, double *Hm)
+INLINE void hess(const double *c, const double *z, double *Hm)
 {
     Hm[0] = c[0] * cos(z[0]);
     Hm[1] = Hm[2] = 0.0;
     Hm[3] = 1.0;
 }
 
-static inline double dhdt(const double *c, const double *z)
+INLINE double dhdt(const double *c, const double *z)
 {
     return -c[1] * cos(z[0]);
 }
 
-#else /* quadratic scenes (scenes/quadratic.py): c = (S, dS/dt, s, ds/dt), S row-major */
+#else /* quadratic scenes (scenes/quadratic.py): c = (S, dS/dt, s, ds/dt, J S), S row-major */
 
-static inline void fill_zero(double *c)
+#define JS (2 * M * M + 2) /* where finish stores J S in a coefficient row */
+
+INLINE void fill_zero(double *c)
 {
     for (int i = 0; i < NCOEF; i++)
         c[i] = 0.0;
 }
 
-static inline double dhdt(const double *c, const double *z)
+/* quadratic.finish: append J S, (J S)[i] = S[n + i], (J S)[n + i] = -S[i] */
+INLINE void finish(double *c)
+{
+    for (int i = 0; i < NDOF; i++) {
+        for (int j = 0; j < M; j++) {
+            c[JS + i * M + j] = c[(NDOF + i) * M + j];
+            c[JS + (NDOF + i) * M + j] = -c[i * M + j];
+        }
+    }
+}
+
+INLINE double dhdt(const double *c, const double *z)
 {
     double acc = 0.0 * z[0];
     for (int i = 0; i < M; i++) {
@@ -107,16 +116,17 @@ static inline double dhdt(const double *c, const double *z)
 
 #if SCENE == DECAYING
 
-static inline void coef(const Params *P, double t, double *c)
+INLINE void coef(const Params *P, double t, double *c)
 {
     double a = exp(-P->lam * t);
     fill_zero(c);
     c[0] = c[3] = a;
     c[4] = c[7] = -P->lam * a;
+    finish(c);
 }
 
 #define HAS_FLOW
-static inline void flow(const Params *P, double t0, double t1, double *z)
+INLINE void flow(const Params *P, double t0, double t1, double *z)
 {
     double angle;
     if (P->lam == 0.0)
@@ -132,7 +142,7 @@ static inline void flow(const Params *P, double t0, double t1, double *z)
 
 #elif SCENE == DAMPED
 
-static inline void coef(const Params *P, double t, double *c)
+INLINE void coef(const Params *P, double t, double *c)
 {
     double grow = exp(P->gamma * t);
     double kin = grow / P->m;
@@ -142,10 +152,11 @@ static inline void coef(const Params *P, double t, double *c)
     c[3] = kin;
     c[4] = -P->gamma * pot;
     c[7] = P->gamma * kin;
+    finish(c);
 }
 
 #define HAS_FLOW
-static inline void flow(const Params *P, double t0, double t1, double *z)
+INLINE void flow(const Params *P, double t0, double t1, double *z)
 {
     double s = t1 - t0;
     double W2 = P->w0 - 0.25 * P->gamma * P->gamma;
@@ -171,17 +182,20 @@ static inline void flow(const Params *P, double t0, double t1, double *z)
 
 #elif SCENE == MODULATED
 
-static inline void coef(const Params *P, double t, double *c)
+INLINE void coef(const Params *P, double t, double *c)
 {
     fill_zero(c);
     c[0] = 1.0 + P->eps * sin(P->alpha * t);
     c[3] = 1.0;
     c[4] = P->eps * P->alpha * cos(P->alpha * t);
+    finish(c);
 }
 
 #elif SCENE == CHARGED
 
-static inline void coef(const Params *P, double t, double *c)
+#define BETA (3 * M * M + 2) /* beta, beta' after the quadratic coefficients */
+
+INLINE void coef(const Params *P, double t, double *c)
 {
     double s = sin(P->w * t);
     double b0 = P->B0 * (1.0 + P->eps * s);
@@ -208,25 +222,27 @@ static inline void coef(const Params *P, double t, double *c)
     }
     c[32] = -P->e * P->d * b0;
     c[33] = -P->e * P->d * b1;
-    c[34] = b0;
-    c[35] = b1;
+    finish(c);
+    c[BETA] = b0;
+    c[BETA + 1] = b1;
 }
 
-static inline void vecpot(const Params *P, const double *c, const double *q, double *A)
+#define HAS_FIELDS
+INLINE void vecpot(const Params *P, const double *c, const double *q, double *A)
 {
-    A[0] = c[34] * ((1.0 + P->C00) * q[0] + (-1.0 + P->C01) * q[1]);
-    A[1] = c[34] * ((1.0 + P->C01) * q[0] + (1.0 + P->C11) * q[1]);
+    A[0] = c[BETA] * ((1.0 + P->C00) * q[0] + (-1.0 + P->C01) * q[1]);
+    A[1] = c[BETA] * ((1.0 + P->C01) * q[0] + (1.0 + P->C11) * q[1]);
 }
 
-static inline void efield(const double *c, const double *q, double *E)
+INLINE void efield(const double *c, const double *q, double *E)
 {
-    E[0] = -c[35] * (q[0] - q[1]);
-    E[1] = -c[35] * (q[0] + q[1]);
+    E[0] = -c[BETA + 1] * (q[0] - q[1]);
+    E[1] = -c[BETA + 1] * (q[0] + q[1]);
 }
 
-static inline double bfield(const Params *P, const double *c)
+INLINE double bfield(const Params *P, const double *c)
 {
-    return c[34] * ((1.0 + P->C01) - (-1.0 + P->C01));
+    return c[BETA] * ((1.0 + P->C01) - (-1.0 + P->C01));
 }
 
 #endif
@@ -234,7 +250,7 @@ static inline double bfield(const Params *P, const double *c)
 /* ---- linalg.solve: the leading n x n block of A (row stride n) against B (n x k, row stride
    k; k = 1 is a vector); partial pivoting, A destroyed ---- */
 
-static inline int solve(double *A, double *B, int n, int k)
+INLINE int solve(double *A, double *B, int n, int k)
 {
     for (int c = 0; c < n; c++) {
         int p = c;
@@ -284,28 +300,26 @@ static inline int solve(double *A, double *B, int n, int k)
     return 1;
 }
 
-/* ---- the family's data, by value ---- */
+/* ---- the family's data as numba receives them (arrays and their lengths), and the scratch
+   whose size depends on the number of stages, allocated once per run like numba's work ---- */
 
 typedef struct {
-#if FAMILY == EXPLICIT
-    double A[STAGES * STAGES], b[STAGES];
-    long stage[STAGES];
-#elif FAMILY == GAUSS
-    double A[STAGES * STAGES], b[STAGES];
-#elif FAMILY == THETA
+    const double *A, *b, *gammas, *offsets;
+    const long *stage;
+    int s, u; /* stages (len(b) or len(gammas)) and time offsets */
     double wq0, wq1, wp0, wp1;
-#elif FAMILY == COMPOSITION
-    double gammas[STAGES];
-#endif
-    double offsets[NOFF];
 } Family;
+
+typedef struct {
+    double *K, *Zs, *Fs, *F, *Jm;
+} Work;
 
 #if !LINEAR
 
 /* ---- member steps (families.py), for scenes that are not quadratic ---- */
 
 /* _newton_done: whether Newton has converged; *prev receives the correction's size. */
-static inline int newton_done(const double *dz, int ndz, const double *z, int nz, double *prev)
+INLINE int newton_done(const double *dz, int ndz, const double *z, int nz, double *prev)
 {
     double size = 1.0;
     for (int i = 0; i < nz; i++) {
@@ -322,11 +336,9 @@ static inline int newton_done(const double *dz, int ndz, const double *z, int nz
     return done;
 }
 
-#if FAMILY == THETA || FAMILY == COMPOSITION
-static inline int theta_core(const Params *P, const double *c, double h, double wq0, double wq1,
-                             double wp0, double wp1, double *z, double *pt)
+INLINE int theta_core(const double *c, double h, double wq0, double wq1, double wp0, double wp1,
+                             double *z, double *pt)
 {
-    (void)P;
     double z1[M], Zt[M], g[M], F[M], Hm[M * M], Jm[M * M];
     for (int i = 0; i < M; i++)
         z1[i] = z[i];
@@ -374,25 +386,24 @@ static inline int theta_core(const Params *P, const double *c, double h, double 
     }
     return status;
 }
-#endif
 
-static inline int step(const Family *D, const Params *P, const double *C, double h, double *z,
-                       double *pt)
+INLINE int composition_step(const Family *D, const double *C, double h, double *z, double *pt)
 {
-#if FAMILY == THETA
-    return theta_core(P, C, h, D->wq0, D->wq1, D->wp0, D->wp1, z, pt);
-#elif FAMILY == COMPOSITION
     int status = OK;
-    for (int i = 0; i < STAGES; i++) {
-        status = theta_core(P, C + i * NCOEF, D->gammas[i] * h, 0.5, 0.5, 0.5, 0.5, z, pt);
+    for (int i = 0; i < D->s; i++) {
+        status = theta_core(C + i * NCOEF, D->gammas[i] * h, 0.5, 0.5, 0.5, 0.5, z, pt);
         if (status != OK)
             break;
     }
     return status;
-#elif FAMILY == EXPLICIT
-    (void)P;
-    const int s = STAGES;
-    double K[STAGES * M], Y[M], g[M];
+}
+
+INLINE int explicit_step(const Family *D, const Work *W, const double *C, double h, double *z,
+                                double *pt)
+{
+    double *K = W->K;
+    double Y[M], g[M];
+    int s = D->s;
     double dpt = 0.0 * *pt;
     for (int i = 0; i < s; i++) {
         for (int r = 0; r < M; r++)
@@ -417,10 +428,14 @@ static inline int step(const Family *D, const Params *P, const double *C, double
     }
     *pt = *pt - h * dpt;
     return OK;
-#elif FAMILY == GAUSS
-    (void)P;
-    const int s = STAGES, sm = STAGES * M;
-    double Zs[STAGES * M], Fs[STAGES * M], y[M], g[M], F[STAGES * M], Hm[M * M], Jm[sm * sm];
+}
+
+INLINE int gauss_step(const Family *D, const Work *W, const double *C, double h, double *z,
+                             double *pt)
+{
+    double *Zs = W->Zs, *Fs = W->Fs, *F = W->F, *Jm = W->Jm;
+    double y[M], g[M], Hm[M * M];
+    int s = D->s, sm = D->s * M;
     for (int i = 0; i < s; i++)
         for (int r = 0; r < M; r++)
             Zs[i * M + r] = z[r];
@@ -488,46 +503,72 @@ static inline int step(const Family *D, const Params *P, const double *C, double
         *pt = *pt - h * dpt;
     }
     return status;
-#else
-#error "this family has no member step for a scene that is not quadratic"
-#endif
+}
+
+INLINE int step(int family, const Family *D, const Work *W,
+                                                      const double *C, double h, double *z, double *pt)
+{
+    switch (family) {
+    case EXPLICIT:
+        return explicit_step(D, W, C, h, z, pt);
+    case THETA:
+        return theta_core(C, h, D->wq0, D->wq1, D->wp0, D->wp1, z, pt);
+    case GAUSS:
+        return gauss_step(D, W, C, h, z, pt);
+    default:
+        return composition_step(D, C, h, z, pt);
+    }
 }
 
 #else /* LINEAR */
 
 /* ---- step matrices (linear.py): z' = M z, p_t' = p_t - (z.Q z / 2 + s) ---- */
 
-/* (J S_j)[i, c] with J = [[0, I], [-I, 0]], for the coefficient row c */
-static inline double js(const double *c, int i, int j)
+/* (J S)[i, j], stored in the coefficient row c by finish */
+INLINE double js(const double *c, int i, int j)
 {
-    return i < NDOF ? c[(NDOF + i) * M + j] : -c[(i - NDOF) * M + j];
+    return c[JS + i * M + j];
 }
 
-static inline double sdot(const double *c, int i, int j)
+INLINE double sdot(const double *c, int i, int j)
 {
     return c[M * M + i * M + j];
 }
 
-static inline double sdot0(const double *c)
+INLINE double sdot0(const double *c)
 {
     return c[2 * M * M + 1];
 }
 
-static inline void identity(double *A)
+INLINE void identity(double *A)
 {
     for (int i = 0; i < M; i++)
         for (int c = 0; c < M; c++)
             A[i * M + c] = i == c ? 1.0 : 0.0;
 }
 
-static inline void zero(double *A)
+INLINE void zero(double *A)
 {
     for (int i = 0; i < M * M; i++)
         A[i] = 0.0;
 }
 
+/* out = scale * op(A) B (op(A) = A^T if transpose_a), or out += that if add */
+INLINE void product(const double *A, const double *B, double *out, int transpose_a, double scale,
+                           int add)
+{
+    for (int i = 0; i < M; i++) {
+        for (int j = 0; j < M; j++) {
+            double acc = 0.0;
+            for (int r = 0; r < M; r++)
+                acc += (transpose_a ? A[r * M + i] : A[i * M + r]) * B[r * M + j];
+            out[i * M + j] = add ? out[i * M + j] + scale * acc : scale * acc;
+        }
+    }
+}
+
 /* Q += scale * G^T (dS/dt) G, with T an M x M scratch */
-static inline void add_sandwich(double *Q, const double *G, const double *c, double scale, double *T)
+INLINE void add_sandwich(double *Q, const double *G, const double *c, double scale, double *T)
 {
     for (int i = 0; i < M; i++) {
         for (int j = 0; j < M; j++) {
@@ -537,19 +578,11 @@ static inline void add_sandwich(double *Q, const double *G, const double *c, dou
             T[i * M + j] = acc;
         }
     }
-    for (int i = 0; i < M; i++) {
-        for (int j = 0; j < M; j++) {
-            double acc = 0.0;
-            for (int r = 0; r < M; r++)
-                acc += G[r * M + i] * T[r * M + j];
-            Q[i * M + j] += scale * acc;
-        }
-    }
+    product(G, T, Q, 1, scale, 1);
 }
 
-#if FAMILY == THETA || FAMILY == COMPOSITION
 /* (I - h J S W1) M = I + h J S W0, N = W0 + W1 M, Q = h N^T S' N; returns s = h s' */
-static inline double theta_matrix(const double *c, double h, double wq0, double wq1, double wp0,
+INLINE double theta_matrix(const double *c, double h, double wq0, double wq1, double wp0,
                                   double wp1, double *Mm, double *Q, double *A, double *N)
 {
     for (int i = 0; i < M; i++) {
@@ -570,47 +603,144 @@ static inline double theta_matrix(const double *c, double h, double wq0, double 
     add_sandwich(Q, N, c, h, A);
     return h * sdot0(c);
 }
-#endif
 
-#if FAMILY == COMPOSITION
 /* (M, Q, s) <- (M1, Q1, s1) after (M, Q, s) */
-static inline double compose(double *Mm, double *Q, double s, const double *M1, const double *Q1,
+INLINE double compose(double *Mm, double *Q, double s, const double *M1, const double *Q1,
                              double s1, double *T)
 {
-    for (int i = 0; i < M; i++) {
-        for (int j = 0; j < M; j++) {
-            double acc = 0.0;
-            for (int r = 0; r < M; r++)
-                acc += Q1[i * M + r] * Mm[r * M + j];
-            T[i * M + j] = acc;
-        }
-    }
-    for (int i = 0; i < M; i++) {
-        for (int j = 0; j < M; j++) {
-            double acc = 0.0;
-            for (int r = 0; r < M; r++)
-                acc += Mm[r * M + i] * T[r * M + j];
-            Q[i * M + j] += acc;
-        }
-    }
-    for (int i = 0; i < M; i++) {
-        for (int j = 0; j < M; j++) {
-            double acc = 0.0;
-            for (int r = 0; r < M; r++)
-                acc += M1[i * M + r] * Mm[r * M + j];
-            T[i * M + j] = acc;
-        }
-    }
+    product(Q1, Mm, T, 0, 1.0, 0);
+    product(Mm, T, Q, 1, 1.0, 1);
+    product(M1, Mm, T, 0, 1.0, 0);
     for (int i = 0; i < M * M; i++)
         Mm[i] = T[i];
     return s + s1;
 }
+
+INLINE double theta_lmatrix(const Family *D, const double *C, double h, double *Mm, double *Q)
+{
+    double A[M * M], N[M * M];
+    return theta_matrix(C, h, D->wq0, D->wq1, D->wp0, D->wp1, Mm, Q, A, N);
+}
+
+INLINE double composition_lmatrix(const Family *D, const double *C, double h, double *Mm,
+                                         double *Q)
+{
+    double W0[M * M], W1[M * M], M1[M * M], Q1[M * M], T[M * M];
+    identity(Mm);
+    zero(Q);
+    double s = 0.0;
+    for (int i = 0; i < D->s; i++) {
+        double s1 = theta_matrix(C + i * NCOEF, D->gammas[i] * h, 0.5, 0.5, 0.5, 0.5, M1, Q1, W0, W1);
+        s = compose(Mm, Q, s, M1, Q1, s1, T);
+    }
+    return s;
+}
+
+/* stage maps G_i = I + h sum_j a_ij J S_j G_j (one solve), M = I + h sum_j b_j J S_j G_j */
+INLINE double gauss_lmatrix(const Family *D, const Work *W, const double *C, double h,
+                                   double *Mm, double *Q)
+{
+    double *Big = W->Jm, *G = W->K;
+    double V[M * M];
+    int s = D->s, sm = D->s * M;
+    for (int i = 0; i < s; i++)
+        for (int j = 0; j < s; j++)
+            for (int r = 0; r < M; r++)
+                for (int c = 0; c < M; c++)
+                    Big[(i * M + r) * sm + j * M + c] = (i == j && r == c ? 1.0 : 0.0)
+                        - h * D->A[i * s + j] * js(C + j * NCOEF, r, c);
+    for (int r = 0; r < sm; r++)
+        for (int c = 0; c < M; c++)
+            G[r * M + c] = r % M == c ? 1.0 : 0.0;
+    solve(Big, G, sm, M);
+    identity(Mm);
+    zero(Q);
+    double total = 0.0;
+    for (int j = 0; j < s; j++) {
+        double hb = h * D->b[j];
+        for (int i = 0; i < M; i++) {
+            for (int c = 0; c < M; c++) {
+                double acc = 0.0;
+                for (int r = 0; r < M; r++)
+                    acc += js(C + j * NCOEF, i, r) * G[(j * M + r) * M + c];
+                Mm[i * M + c] += hb * acc;
+            }
+        }
+        add_sandwich(Q, G + j * M * M, C + j * NCOEF, hb, V);
+        total += hb * sdot0(C + j * NCOEF);
+    }
+    return total;
+}
+
+/* stage maps G_i = I + h sum_(j<i) a_ij K_j with K_j = J S_j G_j; M = I + h sum b_i K_i */
+INLINE double explicit_lmatrix(const Family *D, const Work *W, const double *C, double h,
+                                      double *Mm, double *Q)
+{
+    double *K = W->K;
+    double G[M * M], T[M * M];
+    int s = D->s;
+    identity(Mm);
+    zero(Q);
+    double total = 0.0;
+    for (int i = 0; i < s; i++) {
+        const double *c = C + D->stage[i] * NCOEF;
+        identity(G);
+        for (int j = 0; j < i; j++) {
+            double a = h * D->A[i * s + j];
+            if (a != 0.0)
+                for (int r = 0; r < M * M; r++)
+                    G[r] += a * K[j * M * M + r];
+        }
+        for (int r = 0; r < M; r++) {
+            for (int x = 0; x < M; x++) {
+                double acc = 0.0;
+                for (int y = 0; y < M; y++)
+                    acc += js(c, r, y) * G[y * M + x];
+                K[(i * M + r) * M + x] = acc;
+            }
+        }
+        double hb = h * D->b[i];
+        for (int r = 0; r < M * M; r++)
+            Mm[r] += hb * K[i * M * M + r];
+        add_sandwich(Q, G, c, hb, T);
+        total += hb * sdot0(c);
+    }
+    return total;
+}
+
+#ifdef HAS_FLOW
+/* columns of M from the flow; p_t from H + p_t conserved: Q = M^T S(t+h) M - S(t) */
+INLINE double exact_lmatrix(const Params *P, const double *C, double t, double h, double *Mm,
+                                   double *Q)
+{
+    double S1M[M * M], v[M];
+    for (int c = 0; c < M; c++) {
+        for (int r = 0; r < M; r++)
+            v[r] = r == c ? 1.0 : 0.0;
+        flow(P, t, t + h, v);
+        for (int r = 0; r < M; r++)
+            Mm[r * M + c] = v[r];
+    }
+    for (int i = 0; i < M; i++) {
+        for (int c = 0; c < M; c++) {
+            double acc = 0.0;
+            for (int r = 0; r < M; r++)
+                acc += C[NCOEF + i * M + r] * Mm[r * M + c];
+            S1M[i * M + c] = acc;
+        }
+    }
+    product(Mm, S1M, Q, 1, 1.0, 0);
+    for (int i = 0; i < M; i++)
+        for (int c = 0; c < M; c++)
+            Q[i * M + c] -= C[i * M + c];
+    return C[NCOEF + 2 * M * M] - C[2 * M * M];
+}
 #endif
 
-#if FAMILY == BORIS
+#ifdef HAS_FIELDS
 /* boris_core: drift-kick-drift in (q, v), v = (p - e A) / m, fields at the half step; the
    half-step state (q, p) is left in zh. */
-static inline double boris_core(const Params *P, const double *C, double h, double *z, double pt,
+INLINE double boris_core(const Params *P, const double *C, double h, double *z, double pt,
                                 double *zh)
 {
     double q[2], v[2], A[2], E[2];
@@ -644,123 +774,11 @@ static inline double boris_core(const Params *P, const double *C, double h, doub
     z[3] = P->m * v[1] + P->e * A[1];
     return pt;
 }
-#endif
 
-/* lmatrix: the step's (M, Q) from the coefficient rows C; returns s */
-static inline double lmatrix(const Family *D, const Params *P, const double *C, double t, double h,
-                             double *Mm, double *Q)
+/* columns of M and of the half-step map N (z_half = N z) from the push of unit vectors;
+   Q = h N^T S'(t + h/2) N */
+INLINE double boris_lmatrix(const Params *P, const double *C, double h, double *Mm, double *Q)
 {
-#if FAMILY == THETA
-    (void)P;
-    (void)t;
-    double A[M * M], N[M * M];
-    return theta_matrix(C, h, D->wq0, D->wq1, D->wp0, D->wp1, Mm, Q, A, N);
-#elif FAMILY == COMPOSITION
-    (void)P;
-    (void)t;
-    double W0[M * M], W1[M * M], M1[M * M], Q1[M * M], T[M * M];
-    identity(Mm);
-    zero(Q);
-    double s = 0.0;
-    for (int i = 0; i < STAGES; i++) {
-        double s1 = theta_matrix(C + i * NCOEF, D->gammas[i] * h, 0.5, 0.5, 0.5, 0.5, M1, Q1, W0, W1);
-        s = compose(Mm, Q, s, M1, Q1, s1, T);
-    }
-    return s;
-#elif FAMILY == GAUSS
-    (void)P;
-    (void)t;
-    const int s = STAGES, sm = STAGES * M;
-    double V[M * M], Big[sm * sm], G[STAGES * M * M];
-    for (int i = 0; i < s; i++)
-        for (int j = 0; j < s; j++)
-            for (int r = 0; r < M; r++)
-                for (int c = 0; c < M; c++)
-                    Big[(i * M + r) * sm + j * M + c] = (i == j && r == c ? 1.0 : 0.0)
-                        - h * D->A[i * s + j] * js(C + j * NCOEF, r, c);
-    for (int r = 0; r < sm; r++)
-        for (int c = 0; c < M; c++)
-            G[r * M + c] = r % M == c ? 1.0 : 0.0;
-    solve(Big, G, sm, M);
-    identity(Mm);
-    zero(Q);
-    double total = 0.0;
-    for (int j = 0; j < s; j++) {
-        double hb = h * D->b[j];
-        for (int i = 0; i < M; i++) {
-            for (int c = 0; c < M; c++) {
-                double acc = 0.0;
-                for (int r = 0; r < M; r++)
-                    acc += js(C + j * NCOEF, i, r) * G[(j * M + r) * M + c];
-                Mm[i * M + c] += hb * acc;
-            }
-        }
-        add_sandwich(Q, G + j * M * M, C + j * NCOEF, hb, V);
-        total += hb * sdot0(C + j * NCOEF);
-    }
-    return total;
-#elif FAMILY == EXPLICIT
-    (void)P;
-    (void)t;
-    const int s = STAGES;
-    double G[M * M], T[M * M], K[STAGES * M * M];
-    identity(Mm);
-    zero(Q);
-    double total = 0.0;
-    for (int i = 0; i < s; i++) {
-        const double *c = C + D->stage[i] * NCOEF;
-        identity(G);
-        for (int j = 0; j < i; j++) {
-            double a = h * D->A[i * s + j];
-            if (a != 0.0)
-                for (int r = 0; r < M * M; r++)
-                    G[r] += a * K[j * M * M + r];
-        }
-        for (int r = 0; r < M; r++) {
-            for (int x = 0; x < M; x++) {
-                double acc = 0.0;
-                for (int y = 0; y < M; y++)
-                    acc += js(c, r, y) * G[y * M + x];
-                K[(i * M + r) * M + x] = acc;
-            }
-        }
-        double hb = h * D->b[i];
-        for (int r = 0; r < M * M; r++)
-            Mm[r] += hb * K[i * M * M + r];
-        add_sandwich(Q, G, c, hb, T);
-        total += hb * sdot0(c);
-    }
-    return total;
-#elif FAMILY == EXACT
-    (void)D;
-    double S1M[M * M], v[M];
-    for (int c = 0; c < M; c++) {
-        for (int r = 0; r < M; r++)
-            v[r] = r == c ? 1.0 : 0.0;
-        flow(P, t, t + h, v);
-        for (int r = 0; r < M; r++)
-            Mm[r * M + c] = v[r];
-    }
-    for (int i = 0; i < M; i++) {
-        for (int c = 0; c < M; c++) {
-            double acc = 0.0;
-            for (int r = 0; r < M; r++)
-                acc += C[NCOEF + i * M + r] * Mm[r * M + c];
-            S1M[i * M + c] = acc;
-        }
-    }
-    for (int i = 0; i < M; i++) {
-        for (int c = 0; c < M; c++) {
-            double acc = 0.0;
-            for (int r = 0; r < M; r++)
-                acc += Mm[r * M + i] * S1M[r * M + c];
-            Q[i * M + c] = acc - C[i * M + c];
-        }
-    }
-    return C[NCOEF + 2 * M * M] - C[2 * M * M];
-#elif FAMILY == BORIS
-    (void)D;
-    (void)t;
     double N[M * M], T[M * M], v[M], zh[M];
     for (int c = 0; c < M; c++) {
         for (int r = 0; r < M; r++)
@@ -774,16 +792,42 @@ static inline double lmatrix(const Family *D, const Params *P, const double *C, 
     zero(Q);
     add_sandwich(Q, N, C + NCOEF, h, T);
     return h * sdot0(C + NCOEF);
-#else
-#error "unknown FAMILY"
+}
 #endif
+
+INLINE double lmatrix(int family, const Family *D, const Work *W,
+                                                            const Params *P, const double *C, double t,
+                                                            double h, double *Mm, double *Q)
+{
+    switch (family) {
+    case EXPLICIT:
+        return explicit_lmatrix(D, W, C, h, Mm, Q);
+    case THETA:
+        return theta_lmatrix(D, C, h, Mm, Q);
+    case GAUSS:
+        return gauss_lmatrix(D, W, C, h, Mm, Q);
+    case COMPOSITION:
+        return composition_lmatrix(D, C, h, Mm, Q);
+#ifdef HAS_FLOW
+    case EXACT:
+        return exact_lmatrix(P, C, t, h, Mm, Q);
+#endif
+#ifdef HAS_FIELDS
+    case BORIS:
+        return boris_lmatrix(P, C, h, Mm, Q);
+#endif
+    default:
+        (void)P;
+        (void)t;
+        return NAN;
+    }
 }
 
 #endif /* LINEAR */
 
-/* ---- loops.propagate ---- */
+/* ---- loops.py: propagate_matrix (linear scenes) and propagate_members (the others) ---- */
 
-/* propagate's arguments; done receives the steps completed */
+/* the loop's arguments; done receives the steps completed */
 typedef struct {
     double t0, h;
     double *Z, *PT;
@@ -793,55 +837,78 @@ typedef struct {
     long done;
 } Loop;
 
-static inline void coefs(const Params *P, const double *offsets, double tk, double tk1, double h,
-                         double *C, int reuse)
+INLINE void coefs(const Params *P, const Family *D, double tk, double tk1, double h, double *C,
+                         int reuse)
 {
-    for (int j = 0; j < NOFF; j++) {
+    int u = D->u;
+    for (int j = 0; j < u; j++) {
         if (j == 0 && reuse)
             for (int c = 0; c < NCOEF; c++)
-                C[c] = C[(NOFF - 1) * NCOEF + c];
+                C[c] = C[(u - 1) * NCOEF + c];
         else
-            coef(P, offsets[j] == 1.0 ? tk1 : tk + offsets[j] * h, C + j * NCOEF);
+            coef(P, D->offsets[j] == 1.0 ? tk1 : tk + D->offsets[j] * h, C + j * NCOEF);
     }
 }
 
-static int propagate(const Family *D, const Params *P, Loop *L)
+/* _accept: check the member's new state, store it, record it */
+INLINE int accept(int status, long i, const double *z, const double *old, double pt, Loop *L,
+                         long rec, int recording)
 {
-    double t0 = L->t0, h = L->h;
-    double *Z = L->Z, *PT = L->PT, *Trec = L->Trec, *Zrec = L->Zrec, *PTrec = L->PTrec;
-    double *dZrec = L->dZrec;
-    long N = L->N, ld = L->m, nsteps = L->nsteps, stride = L->stride;
-    double C[NOFF * NCOEF], z[M], old[M];
+    long N = L->N, ld = L->m;
+    if (status == OK && !isfinite(pt))
+        status = OVERFLOW;
+    for (int r = 0; r < M; r++)
+        if (!isfinite(z[r]))
+            status = OVERFLOW;
+    if (status == OK) {
+        L->PT[i] = pt;
+        for (int r = 0; r < M; r++)
+            L->Z[i * ld + r] = z[r];
+        if (recording) {
+            L->PTrec[rec * N + i] = pt;
+            for (int r = 0; r < M; r++) {
+                L->Zrec[(rec * N + i) * ld + r] = z[r];
+                if (L->ndz > 0)
+                    L->dZrec[(rec * N + i) * ld + r] = z[r] - old[r];
+            }
+        }
+    }
+    return status;
+}
+
+INLINE int propagate(int family, const Family *D, const Work *W,
+                                                           const Params *P, Loop *Lp)
+{
+    Loop L = *Lp;
+    double t0 = L.t0, h = L.h;
+    long ld = L.m;
+    double C[D->u * NCOEF], z[M], old[M];
+    int can_reuse = D->u > 1 && D->offsets[0] == 0.0 && D->offsets[D->u - 1] == 1.0;
 #if LINEAR
     double Mm[M * M], Q[M * M];
 #endif
-    int can_reuse = NOFF > 1 && D->offsets[0] == 0.0 && D->offsets[NOFF - 1] == 1.0;
-    int increments = L->ndz > 0;
-    Trec[0] = t0;
-    for (long i = 0; i < N; i++) {
-        PTrec[i] = PT[i];
+    L.Trec[0] = t0;
+    for (long i = 0; i < L.N; i++) {
+        L.PTrec[i] = L.PT[i];
         for (int r = 0; r < M; r++) {
-            Zrec[i * ld + r] = Z[i * ld + r];
-            if (increments)
-                dZrec[i * ld + r] = NAN;
+            L.Zrec[i * ld + r] = L.Z[i * ld + r];
+            if (L.ndz > 0)
+                L.dZrec[i * ld + r] = NAN;
         }
     }
     long rec = 1;
-    double s = 0.0;
-    for (long k = 0; k < nsteps; k++) {
+    for (long k = 0; k < L.nsteps; k++) {
         double tk = t0 + k * h;
-        double tk1 = t0 + (k + 1) * h;
-        coefs(P, D->offsets, tk, tk1, h, C, can_reuse && k > 0);
-        int recording = (k + 1) % stride == 0;
+        coefs(P, D, tk, t0 + (k + 1) * h, h, C, can_reuse && k > 0);
 #if LINEAR
-        s = lmatrix(D, P, C, tk, h, Mm, Q);
+        double s = lmatrix(family, D, W, P, C, tk, h, Mm, Q);
 #endif
-        for (long i = 0; i < N; i++) {
-            for (int r = 0; r < M; r++)
-                old[r] = Z[i * ld + r];
+        int recording = (k + 1) % L.stride == 0;
+        for (long i = 0; i < L.N; i++) {
 #if LINEAR
-            int status = OK;
             double quad = 0.0;
+            for (int r = 0; r < M; r++)
+                old[r] = L.Z[i * ld + r];
             for (int r = 0; r < M; r++) {
                 double acc = 0.0, qr = 0.0;
                 for (int c = 0; c < M; c++) {
@@ -851,81 +918,99 @@ static int propagate(const Family *D, const Params *P, Loop *L)
                 z[r] = acc;
                 quad += old[r] * qr;
             }
-            double pt = PT[i] - (0.5 * quad + s);
+            int status = accept(OK, i, z, old, L.PT[i] - (0.5 * quad + s), &L, rec, recording);
 #else
-            (void)s;
-            for (int r = 0; r < M; r++)
+            for (int r = 0; r < M; r++) {
+                old[r] = L.Z[i * ld + r];
                 z[r] = old[r];
-            double pt = PT[i];
-            int status = step(D, P, C, h, z, &pt);
-#endif
-            if (status == OK && !isfinite(pt))
-                status = OVERFLOW;
-            for (int r = 0; r < M; r++)
-                if (!isfinite(z[r]))
-                    status = OVERFLOW;
-            if (status != OK) {
-                L->done = k;
-                return status;
             }
-            PT[i] = pt;
-            for (int r = 0; r < M; r++)
-                Z[i * ld + r] = z[r];
-            if (recording) {
-                PTrec[rec * N + i] = pt;
-                for (int r = 0; r < M; r++) {
-                    Zrec[(rec * N + i) * ld + r] = z[r];
-                    if (increments)
-                        dZrec[(rec * N + i) * ld + r] = z[r] - old[r];
-                }
+            double pt = L.PT[i];
+            int status = step(family, D, W, C, h, z, &pt);
+            status = accept(status, i, z, old, pt, &L, rec, recording);
+#endif
+            if (status != OK) {
+                Lp->done = k;
+                return status;
             }
         }
         if (recording) {
-            Trec[rec] = tk1;
+            L.Trec[rec] = t0 + (k + 1) * h;
             rec += 1;
         }
     }
-    L->done = nsteps;
+    Lp->done = L.nsteps;
     return OK;
 }
 
-/* ---- the entry point: family values and scene parameters copied in by value ---- */
+/* ---- entry points, one per family: the scene's parameters by value, the family's arrays ---- */
 
-int run(Loop *L, const double *params, const double *offsets, const double *A, const double *b,
-        const long *stage, const double *w)
+int run_explicit(Loop *L, const double *params, const double *offsets, long u, const double *A,
+                 const double *b, const long *stage, long s)
 {
-    Params P;
-    Family D;
-    memcpy(&P, params, sizeof P);
-    memcpy(D.offsets, offsets, sizeof D.offsets);
-#if FAMILY == EXPLICIT
-    memcpy(D.A, A, sizeof D.A);
-    memcpy(D.b, b, sizeof D.b);
-    memcpy(D.stage, stage, sizeof D.stage);
-    (void)w;
-#elif FAMILY == GAUSS
-    memcpy(D.A, A, sizeof D.A);
-    memcpy(D.b, b, sizeof D.b);
-    (void)stage;
-    (void)w;
-#elif FAMILY == THETA
-    D.wq0 = w[0];
-    D.wq1 = w[1];
-    D.wp0 = w[2];
-    D.wp1 = w[3];
-    (void)A;
-    (void)b;
-    (void)stage;
-#elif FAMILY == COMPOSITION
-    memcpy(D.gammas, w, sizeof D.gammas);
-    (void)A;
-    (void)b;
-    (void)stage;
-#else
-    (void)A;
-    (void)b;
-    (void)stage;
-    (void)w;
-#endif
-    return propagate(&D, &P, L);
+    Params P = *(const Params *)params;
+    Family D = {.offsets = offsets, .u = (int)u};
+    D.A = A;
+    D.b = b;
+    D.stage = stage;
+    D.s = (int)s;
+    double K[LINEAR ? s * M * M : s * M];
+    Work W = {.K = K};
+    return propagate(EXPLICIT, &D, &W, &P, L);
 }
+
+int run_gauss(Loop *L, const double *params, const double *offsets, long u, const double *A,
+              const double *b, long s)
+{
+    Params P = *(const Params *)params;
+    Family D = {.offsets = offsets, .u = (int)u};
+    D.A = A;
+    D.b = b;
+    D.s = (int)s;
+    double K[s * M * M], Zs[s * M], Fs[s * M], F[s * M], Jm[s * M * s * M];
+    Work W = {.K = K, .Zs = Zs, .Fs = Fs, .F = F, .Jm = Jm};
+    return propagate(GAUSS, &D, &W, &P, L);
+}
+
+int run_theta(Loop *L, const double *params, const double *offsets, long u, double wq0, double wq1,
+              double wp0, double wp1)
+{
+    Params P = *(const Params *)params;
+    Family D = {.offsets = offsets, .u = (int)u};
+    D.wq0 = wq0;
+    D.wq1 = wq1;
+    D.wp0 = wp0;
+    D.wp1 = wp1;
+    Work W = {0};
+    return propagate(THETA, &D, &W, &P, L);
+}
+
+int run_composition(Loop *L, const double *params, const double *offsets, long u, const double *gammas,
+                    long s)
+{
+    Params P = *(const Params *)params;
+    Family D = {.offsets = offsets, .u = (int)u};
+    D.gammas = gammas;
+    D.s = (int)s;
+    Work W = {0};
+    return propagate(COMPOSITION, &D, &W, &P, L);
+}
+
+#if LINEAR && defined(HAS_FLOW)
+int run_exact(Loop *L, const double *params, const double *offsets, long u)
+{
+    Params P = *(const Params *)params;
+    Family D = {.offsets = offsets, .u = (int)u};
+    Work W = {0};
+    return propagate(EXACT, &D, &W, &P, L);
+}
+#endif
+
+#if LINEAR && defined(HAS_FIELDS)
+int run_boris(Loop *L, const double *params, const double *offsets, long u)
+{
+    Params P = *(const Params *)params;
+    Family D = {.offsets = offsets, .u = (int)u};
+    Work W = {0};
+    return propagate(BORIS, &D, &W, &P, L);
+}
+#endif

@@ -99,6 +99,15 @@ class Trajectory:
     def t_final(self):
         return self.t[-1]
 
+    @property
+    def Pi(self):
+        """Mechanical momentum p - e A(q, t) (K, N, 2) for the charged scene, else None."""
+        if self.setup.scene.name != "charged":
+            return None
+        from .scenes.charged import mechanical
+
+        return mechanical(self.setup.P, self.t, self.q, self.p)
+
 
 def initial_states(setup, z0=None):
     """(N, 2n) initial states: z0 rows if given, else the scene's initial condition."""

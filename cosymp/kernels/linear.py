@@ -15,9 +15,9 @@ from .stack import matrices, stage_matrices, stage_square, vectors
 
 @njit(**INLINE)
 def js(C, j, n, i, c):
-    """(J S_j)[i, c] with J = [[0, I], [-I, 0]]."""
+    """(J S_j)[i, c], stored by scenes.quadratic.finish."""
     m = 2 * n
-    return C[j, (n + i) * m + c] if i < n else -C[j, (i - n) * m + c]
+    return C[j, 2 * m * m + 2 + i * m + c]
 
 
 @njit(**INLINE)

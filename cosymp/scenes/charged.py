@@ -24,7 +24,8 @@ from .base import Param, Scene, SceneKernel
 
 ChargedParams = namedtuple("ChargedParams", "m e B0 eps w kind C00 C01 C11 d ops args")
 K = np.array([[1.0, -1.0], [1.0, 1.0]])
-NCOEF = quadratic.ncoef(2) + 2
+BETA = quadratic.ncoef(2)
+NCOEF = BETA + 2
 BETA_PAPER, BETA_CONSTANT, BETA_EXPRESSION = 0, 1, 2
 
 
@@ -98,27 +99,28 @@ def coef(P, t, C, r):
             C[r, 16 + (2 + i) * 4 + 2 + j] = 0.0
     C[r, 32] = -P.e * P.d * b0
     C[r, 33] = -P.e * P.d * b1
-    C[r, 34] = b0
-    C[r, 35] = b1
+    quadratic.finish(P, C, r)
+    C[r, BETA] = b0
+    C[r, BETA + 1] = b1
 
 
 @njit(**INLINE)
 def vecpot(P, C, r, q, A):
-    A[0] = C[r, 34] * ((1.0 + P.C00) * q[0] + (-1.0 + P.C01) * q[1])
-    A[1] = C[r, 34] * ((1.0 + P.C01) * q[0] + (1.0 + P.C11) * q[1])
+    A[0] = C[r, BETA] * ((1.0 + P.C00) * q[0] + (-1.0 + P.C01) * q[1])
+    A[1] = C[r, BETA] * ((1.0 + P.C01) * q[0] + (1.0 + P.C11) * q[1])
 
 
 @njit(**INLINE)
 def efield(P, C, r, q, E):
     """E = -grad phi' - d_t A' = beta' C q - beta' (K + C) q = -beta' K q."""
-    E[0] = -C[r, 35] * (q[0] - q[1])
-    E[1] = -C[r, 35] * (q[0] + q[1])
+    E[0] = -C[r, BETA + 1] * (q[0] - q[1])
+    E[1] = -C[r, BETA + 1] * (q[0] + q[1])
 
 
 @njit(**INLINE)
 def bfield(P, C, r):
     """B_z = curl A' = beta ((K + C)_10 - (K + C)_01) = 2 beta."""
-    return C[r, 34] * ((1.0 + P.C01) - (-1.0 + P.C01))
+    return C[r, BETA] * ((1.0 + P.C01) - (-1.0 + P.C01))
 
 
 class BetaParam(Param):

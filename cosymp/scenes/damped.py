@@ -21,6 +21,7 @@ def coef(P, t, C, r):
     C[r, 3] = kin
     C[r, 4] = -P.gamma * pot
     C[r, 7] = P.gamma * kin
+    quadratic.finish(P, C, r)
 
 
 @njit(**INLINE)

@@ -17,6 +17,7 @@ def coef(P, t, C, r):
     C[r, :] = 0.0
     C[r, 0] = C[r, 3] = a
     C[r, 4] = C[r, 7] = -P.lam * a
+    quadratic.finish(P, C, r)
 
 
 @njit(**INLINE)

@@ -17,6 +17,7 @@ def coef(P, t, C, r):
     C[r, 0] = 1.0 + P.eps * np.sin(P.alpha * t)
     C[r, 3] = 1.0
     C[r, 4] = P.eps * P.alpha * np.cos(P.alpha * t)
+    quadratic.finish(P, C, r)
 
 
 SCENE = Scene(

@@ -1,7 +1,8 @@
 """Scenes whose H is quadratic in z = (q, p): H = z.S(t).z / 2 + s(t).
 
 Such a scene only writes its coefficient function, filling row r of C with S (row-major, 2n x 2n),
-dS/dt, s and ds/dt; energy, gradient, Hessian and dH/dt below serve them all.
+dS/dt, s and ds/dt and ending with `finish`, which appends J S (the matrix of the linear vector
+field, read by the step builders); energy, gradient, Hessian and dH/dt below serve them all.
 """
 from numba import njit
 
@@ -49,6 +50,18 @@ def hess(P, C, r, z, Hm):
             Hm[i, j] = C[r, i * m + j]
 
 
+@njit(**INLINE)
+def finish(P, C, r):
+    """Append J S to row r: (J S)[i] = S[n + i], (J S)[n + i] = -S[i], J = [[0, I], [-I, 0]]."""
+    n = ndof(P)
+    m = 2 * n
+    off = 2 * m * m + 2
+    for i in range(n):
+        for c in range(m):
+            C[r, off + i * m + c] = C[r, (n + i) * m + c]
+            C[r, off + (n + i) * m + c] = -C[r, i * m + c]
+
+
 def ncoef(ndof):
-    """Length of a quadratic scene's coefficient vector: S, dS/dt, s, ds/dt."""
-    return 2 * (2 * ndof) ** 2 + 2
+    """Length of a quadratic scene's coefficient vector: S, dS/dt, s, ds/dt, J S."""
+    return 3 * (2 * ndof) ** 2 + 2
