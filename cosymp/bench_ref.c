@@ -370,7 +370,7 @@ INLINE int theta_core(const double *c, double h, double wq0, double wq1, double 
         }
         for (int i = 0; i < M; i++)
             z1[i] += F[i];
-        if (newton_done(F, M, z1, M, &prev) || LINEAR) {
+        if (newton_done(F, M, z1, M, &prev)) {
             status = OK;
             break;
         }
@@ -482,7 +482,7 @@ INLINE int gauss_step(const Family *D, const Work *W, const double *C, double h,
         for (int i = 0; i < s; i++)
             for (int r = 0; r < M; r++)
                 Zs[i * M + r] += F[i * M + r];
-        if (newton_done(F, sm, z, M, &prev) || LINEAR) {
+        if (newton_done(F, sm, z, M, &prev)) {
             status = OK;
             break;
         }
