@@ -128,11 +128,7 @@ INLINE void coef(const Params *P, double t, double *c)
 #define HAS_FLOW
 INLINE void flow(const Params *P, double t0, double t1, double *z)
 {
-    double angle;
-    if (P->lam == 0.0)
-        angle = t1 - t0;
-    else
-        angle = -exp(-P->lam * t0) * expm1(-P->lam * (t1 - t0)) / P->lam;
+    double angle = -exp(-P->lam * t0) * expm1(-P->lam * (t1 - t0)) / P->lam;
     double c = cos(angle);
     double s = sin(angle);
     double q = z[0];
