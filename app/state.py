@@ -1,0 +1,651 @@
+"""The app's state: inputs, their validation and the derived data, without any UI.
+
+Every object here is a `param.Parameterized` that can be created, changed and inspected in a
+plain Python session (the tests do). Computation runs through `param`'s async executor: under
+`panel serve` it is a task on the session's event loop whose numerical work runs in threads
+(`asyncio.to_thread`; the kernels release the GIL, so the two methods of a comparison run at
+once); without a server the same code runs to completion before the assignment returns.
+
+Requests are coalesced: while one computation runs, further changes only mark the inputs as
+newer, and the loop computes again with the latest inputs once it is done. That is the
+throttle of the live views: they update as fast as the server computes, never queueing stale
+work. Bad input never reaches the derived data: it becomes a `Note` in `Study.message` that
+says what to change, and the last good results stay.
+"""
+import asyncio
+import math
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from functools import cache, partial
+
+import numpy as np
+import param
+
+from cosymp.diagnostics import (
+    det_deviation,
+    nearby_states,
+    paper_volume_form,
+    symplecticity_defect,
+    tangent_maps,
+)
+from cosymp.errors import InputError, RunError
+from cosymp.integrate import Setup, check_step, simulate
+from cosymp.methods import METHODS
+from cosymp.scenes import SCENES
+from cosymp.study import compare, gauge_study
+
+from .presets import long_horizon
+
+LIVE_MAX_STEPS = 2_000_000
+DENSE_RECORDS = 100_000
+CLOUD_POINTS = {True: 32, False: 64}
+DELTA = 1e-4
+VIEWS = {"Orbits": "compare", "Structure": "structure", "Cloud": "cloud", "Gauges": "gauges",
+         "Theta lesson": "theta", "Play": "play", "Long run": "long"}
+URL_NAMES = {"scene": "scene", "method": "method", "other": "vs", "theta": "theta", "h": "h", "T": "T",
+             "values": "p", "view": "view"}
+LONG_URL_NAMES = {"T_long": "T_long"}
+SWEEP_THETAS = np.linspace(0.0, 1.0, 21)
+SWEEP_STEPS = 200
+LONG_BINS = 20_000
+LONG_CHUNK_SECONDS = 0.3
+LONG_CHUNK_BYTES = 40_000_000
+
+
+@dataclass(frozen=True)
+class Note:
+    """A message for the user: level is 'error', 'warning' or 'info'."""
+
+    level: str
+    text: str
+
+
+@dataclass(frozen=True)
+class Entry:
+    """One method's run in a comparison: label, Comparison (None if nothing could be computed),
+    and the failure message of a run that stopped early ('' if it reached T)."""
+
+    label: str
+    method: str
+    comparison: object
+    failure: str
+
+
+@dataclass(frozen=True)
+class Runs:
+    """The derived data of a comparison: the scene, step and horizon, and one Entry per method."""
+
+    scene: str
+    h: float
+    T: float
+    entries: tuple
+
+    @property
+    def ok(self):
+        return [e for e in self.entries if e.comparison is not None]
+
+
+def soft_range(p):
+    """Slider range of a numeric scene parameter: its bounds when they are narrow, else a range
+    around the default within them (any value within the bounds can still be typed)."""
+    lo, hi = p.bounds
+    if hi - lo <= 2.0:
+        return lo, hi
+    x = float(p.default)
+    s = max(2.0 * abs(x), 2.5)
+    return max(lo, x - s), min(hi, x + s)
+
+
+@cache
+def inputs_class(scene_name):
+    """A Parameterized class mirroring the scene's parameters (bounds, docs, choices)."""
+    scene = SCENES[scene_name]
+    params = {}
+    for p in scene.params:
+        if p.choices:
+            params[p.name] = param.Selector(default=p.default, objects=list(p.choices), doc=p.doc,
+                                            label=p.name)
+        elif isinstance(p.default, str):
+            params[p.name] = param.String(default=p.default, doc=p.doc, label=p.name)
+        else:
+            lo, hi = soft_range(p)
+            bounds = tuple(None if math.isinf(b) else b for b in p.bounds)
+            params[p.name] = param.Number(default=float(p.default), bounds=bounds, softbounds=(lo, hi),
+                                          step=(hi - lo) / 500, doc=p.doc, label=p.name)
+    return param.parameterized_class(f"{scene_name.title()}Inputs", params)
+
+
+def method_label(name, theta):
+    m = METHODS[name]
+    return f"{name} (θ = {theta:g})" if m.takes_theta else name
+
+
+def theta_for(method, theta):
+    return theta if METHODS[method].takes_theta else None
+
+
+def compare_until_failure(setup, h, T):
+    """compare(), or, for a run that stops early, compare() up to the last completed step with
+    the failure message. Returns (Comparison or None, message). The carried loop has
+    CLOUD_POINTS[linear] points (a linear map carries a polygon to a polygon: fewer suffice)."""
+    cloud_points = CLOUD_POINTS[setup.scene.kernel.linear]
+    try:
+        return compare(setup, h, T, delta=DELTA, cloud_points=cloud_points), ""
+    except RunError as err:
+        message = str(err)
+        steps = err.step
+    for _ in range(3):
+        if steps < 1:
+            return None, message
+        try:
+            return compare(setup, h, steps * h, delta=DELTA, cloud_points=cloud_points), message
+        except RunError as again:
+            steps = min(steps - 1, again.step)
+    return None, message
+
+
+def run_pair(scene, setups, h, T):
+    """Compare the setups (both at once, in threads) and return Runs."""
+    with ThreadPoolExecutor(len(setups)) as pool:
+        done = list(pool.map(lambda s: compare_until_failure(s, h, T), setups))
+    entries = []
+    for s, (comparison, failure) in zip(setups, done):
+        label = method_label(s.method.name, s.theta)
+        if any(e.label == label for e in entries):
+            label += " (2)"
+        entries.append(Entry(label, s.method.name, comparison, failure))
+    return Runs(scene, h, T, tuple(entries))
+
+
+def failure_note(runs):
+    texts = [f"{e.label}: {e.failure}" + (f"; showing data up to t = {e.comparison.run.t[-1]:.6g}"
+                                          if e.comparison is not None else "")
+             for e in runs.entries if e.failure]
+    return Note("warning", " | ".join(texts)) if texts else None
+
+
+class Derived(param.Parameterized):
+    """Coalesced recomputation. `_schedule()` asks for fresh data (computed off the event loop;
+    requests made meanwhile merge into one), `refresh()` computes now. Subclasses give `_job()`
+    (the validated inputs, None for nothing to do, or InputError), `_compute(job)` (pure, run in a
+    thread), `_apply(result)` and `_say(note)`."""
+
+    busy = param.Boolean(default=False, doc="A computation is under way.")
+
+    def __init__(self, **params):
+        super().__init__(**params)
+        self._wanted = 0
+        self._done = 0
+        self._draining = False
+
+    def _schedule(self):
+        self._wanted += 1
+        if not self._draining:
+            self._draining = True
+            param.parameterized.async_executor(self._drain)
+
+    def refresh(self):
+        """Compute from the current inputs now, in this thread (no event loop needed)."""
+        self._wanted += 1
+        target = self._wanted
+        try:
+            job = self._job()
+        except InputError as err:
+            self._say(Note("error", str(err)))
+            job = None
+        if job is not None:
+            self._apply(self._compute(job))
+        self._done = max(self._done, target)
+
+    async def _drain(self):
+        self.busy = True
+        try:
+            while self._done < self._wanted:
+                target = self._wanted
+                try:
+                    job = self._job()
+                except InputError as err:
+                    self._done = target
+                    self._say(Note("error", str(err)))
+                    continue
+                if job is None:
+                    self._done = target
+                    continue
+                result = await asyncio.to_thread(self._compute, job)
+                self._done = target
+                self._apply(result)
+        finally:
+            self._draining = False
+            self.busy = False
+
+    def _say(self, note):
+        raise NotImplementedError
+
+    def _job(self):
+        raise NotImplementedError
+
+    def _compute(self, job):
+        raise NotImplementedError
+
+    def _apply(self, result):
+        raise NotImplementedError
+
+
+class Study(Derived):
+    """Scene, methods and parameters of a comparison, and its results.
+
+    `values` holds the scene parameters that differ from the scene's defaults (the URL carries
+    it); `inputs` is a Parameterized mirroring the scene's parameters, for the controls. Either
+    can be changed; the other follows.
+    """
+
+    scene = param.Selector(default="damped", objects={s.title: k for k, s in SCENES.items()},
+                           doc="The time-dependent Hamiltonian system.")
+    method = param.Selector(default="midpoint", objects={m.title: k for k, m in METHODS.items()},
+                            doc="The method under study.")
+    other = param.Selector(default="rk4", objects={m.title: k for k, m in METHODS.items()},
+                           doc="The method it is compared with.", label="Compared with")
+    theta = param.Number(default=0.5, bounds=(0.0, 1.0), step=0.01, label="θ",
+                         doc="θ of the theta methods (θ = 1/2: midpoint; θ = 0: the paper's scheme).")
+    h = param.Number(default=SCENES["damped"].h, doc="Step size h > 0.")
+    T = param.Number(default=SCENES["damped"].T, doc="Horizon T of the live views.")
+    values = param.Dict(default={}, doc="Scene parameters that differ from the scene's defaults.")
+    view = param.Selector(default="compare", objects=VIEWS, doc="The active view.")
+    inputs = param.Parameter(doc="The scene's parameters as a Parameterized (for the controls).")
+    results = param.ClassSelector(class_=Runs, doc="The last good comparison.")
+    shown = param.String(default="", doc="What the views are laid out for: 'scene/sparse', or 'scene/dense' "
+                                         "when a run has more than DENSE_RECORDS records.")
+    message = param.ClassSelector(class_=Note, doc="The last message for the user.")
+
+    def __init__(self, **params):
+        super().__init__(**params)
+        scene = self.scene_obj
+        self.param.update({k: getattr(scene, k) for k in ("h", "T") if k not in params})
+        self._nested = False
+        self._syncing = False
+        try:
+            self.inputs = self._make_inputs()
+        except InputError as err:
+            self.say(Note("error", str(err)))
+            self.values = {}
+            self.inputs = self._make_inputs()
+        self.param.watch(self._on_change, ["scene", "method", "other", "theta", "h", "T", "values"])
+        self.refresh()
+
+    def say(self, note):
+        """Post a message, once (a repeated message is posted again)."""
+        with param.parameterized.discard_events(self):
+            self.message = note
+        self.param.trigger("message")
+
+    _say = say
+
+    @property
+    def scene_obj(self):
+        return SCENES[self.scene]
+
+    def setups(self):
+        """The two checked setups, or InputError saying what to change."""
+        scene = self.scene_obj
+        return tuple(Setup.make(scene, m, self.values, theta_for(m, self.theta))
+                     for m in (self.method, self.other))
+
+    def check_horizon(self):
+        steps = check_step(self.h, self.T)
+        if steps > LIVE_MAX_STEPS:
+            raise InputError(f"T/h = {steps:.3g} steps is beyond the live views' limit of "
+                             f"{LIVE_MAX_STEPS:.0e}: increase h, shorten T, or use the Long run view")
+        return steps
+
+    def _make_inputs(self):
+        inputs = inputs_class(self.scene)(**self.scene_obj.values(self.values))
+        inputs.param.watch(self._on_inputs, [p.name for p in self.scene_obj.params])
+        return inputs
+
+    def _on_inputs(self, *events):
+        if self._syncing:
+            return
+        defaults = {p.name: p.default for p in self.scene_obj.params}
+        current = {name: getattr(self.inputs, name) for name in defaults}
+        self.values = {k: v for k, v in current.items() if v != defaults[k]}
+
+    def _on_change(self, *events):
+        if self._nested:
+            return
+        changed = {e.name for e in events}
+        scene = self.scene_obj
+        if "scene" in changed:
+            updates = {k: getattr(scene, k) for k in ("h", "T") if k not in changed}
+            if "values" not in changed:
+                updates["values"] = {}
+            for name, fallback in (("method", "midpoint"), ("other", "rk4")):
+                reason = METHODS[getattr(self, name)].refusal(scene)
+                if reason:
+                    updates[name] = fallback
+                    self.say(Note("info", f"{reason}; switched to {fallback}"))
+            try:
+                scene.values(updates.get("values", self.values))
+            except InputError as err:
+                self.say(Note("error", str(err)))
+                updates["values"] = {}
+            self._nested = True
+            try:
+                self.param.update(**updates)
+            finally:
+                self._nested = False
+            self.inputs = self._make_inputs()
+        elif "values" in changed:
+            try:
+                vals = scene.values(self.values)
+            except InputError as err:
+                self.say(Note("error", str(err)))
+                return
+            self._syncing = True
+            try:
+                self.inputs.param.update(**vals)
+            finally:
+                self._syncing = False
+        self._schedule()
+
+    def _job(self):
+        setups = self.setups()
+        self.check_horizon()
+        return self.scene, setups, float(self.h), float(self.T)
+
+    def _compute(self, job):
+        scene, setups, h, T = job
+        return run_pair(scene, setups, h, T)
+
+    def _apply(self, runs):
+        dense = any(len(c.run.t) > DENSE_RECORDS for c in (e.comparison for e in runs.ok))
+        self.param.update(results=runs, shown=f"{runs.scene}/{'dense' if dense else 'sparse'}")
+        note = failure_note(runs)
+        if note:
+            self.say(note)
+
+
+class ThetaLesson(Derived):
+    """The lifted theta-method against the naive one at the study's θ, on the study's scene,
+    and a θ sweep of their one-step defects (max over the first SWEEP_STEPS steps)."""
+
+    study = param.ClassSelector(class_=Study)
+    results = param.ClassSelector(class_=Runs, doc="Lifted and naive runs at the study's θ.")
+    sweep = param.Dict(default=None, allow_None=True,
+                       doc="'thetas', and per method name {'det': max |det M - 1|, 'symp': max "
+                           "|M^T J M - J|} at each θ.")
+
+    def __init__(self, **params):
+        super().__init__(**params)
+        self._sweep_key = None
+        self.study.param.watch(self._on_study, ["scene", "theta", "h", "T", "values", "view"])
+        if self.active:
+            self.refresh()
+
+    @property
+    def active(self):
+        return self.study.view == "theta"
+
+    def _say(self, note):
+        self.study.say(note)
+
+    def _on_study(self, *events):
+        if self.active:
+            self._schedule()
+
+    def _job(self):
+        s = self.study
+        setups = tuple(Setup.make(s.scene, m, s.values, s.theta) for m in ("theta", "theta-naive"))
+        s.check_horizon()
+        key = (s.scene, tuple(sorted(s.values.items())), float(s.h))
+        return s.scene, setups, float(s.h), float(s.T), key
+
+    def _compute(self, job):
+        scene, setups, h, T, key = job
+        sweep = None if key == self._sweep_key else theta_sweep(setups, h, T)
+        return run_pair(scene, setups, h, T), sweep, key
+
+    def _apply(self, result):
+        runs, sweep, key = result
+        self.results = runs
+        if sweep is not None:
+            self._sweep_key = key
+            self.sweep = sweep
+        note = failure_note(runs)
+        if note:
+            self.study.say(note)
+
+
+def theta_sweep(setups, h, T):
+    """max |det M - 1| and max ||M^T J M - J|| over the first steps, for each θ of SWEEP_THETAS."""
+    steps = min(SWEEP_STEPS, check_step(h, T))
+    out = {"thetas": SWEEP_THETAS}
+    for s in setups:
+        det, symp = [], []
+        for th in SWEEP_THETAS:
+            try:
+                run = simulate(Setup.make(s.scene, s.method, s.values, float(th)), h, steps * h)
+                M = tangent_maps(run)
+                det.append(float(np.max(det_deviation(M))))
+                symp.append(float(np.max(symplecticity_defect(M))))
+            except RunError:
+                det.append(np.nan)
+                symp.append(np.nan)
+        out[s.method.name] = {"det": np.array(det), "symp": np.array(symp)}
+    return out
+
+
+class GaugeStudy(Derived):
+    """The charged particle in all five gauges with the study's method, h, T and parameters."""
+
+    study = param.ClassSelector(class_=Study)
+    results = param.Dict(default=None, allow_None=True,
+                         doc="{gauge: {'per-gauge': (t, q, p, Pi), 'transported': ...}}.")
+    method = param.String(default="", doc="The method of the results.")
+
+    def __init__(self, **params):
+        super().__init__(**params)
+        self.study.param.watch(self._on_study, ["scene", "method", "theta", "h", "T", "values", "view"])
+        if self.active:
+            self.refresh()
+
+    @property
+    def active(self):
+        return self.study.view == "gauges" and self.study.scene == "charged"
+
+    def _say(self, note):
+        self.study.say(note)
+
+    def _on_study(self, *events):
+        if self.active:
+            self._schedule()
+
+    def _job(self):
+        s = self.study
+        if s.scene != "charged":
+            return None
+        s.check_horizon()
+        values = {k: v for k, v in s.values.items() if k != "gauge"}
+        theta = theta_for(s.method, s.theta)
+        Setup.make("charged", s.method, values, theta)
+        return s.method, values, float(s.h), float(s.T), theta
+
+    def _compute(self, job):
+        method, values, h, T, theta = job
+        try:
+            return method_label(method, theta), gauge_study(method, values, h, T, theta), ""
+        except RunError as err:
+            return method_label(method, theta), None, str(err)
+
+    def _apply(self, result):
+        label, data, failure = result
+        if failure:
+            self.study.say(Note("warning", f"gauge study with {label}: {failure}"))
+            return
+        self.method = label
+        self.results = data
+
+
+class Playback(param.Parameterized):
+    """The animation's position (frame of FRAMES) and speed (frames per second)."""
+
+    FRAMES = 200
+    frame = param.Integer(default=200, bounds=(0, 200), doc="Current frame; FRAMES shows the whole run.")
+    fps = param.Selector(default=20, objects={"5 frames/s": 5, "10 frames/s": 10, "20 frames/s": 20,
+                                              "40 frames/s": 40}, doc="Playback speed.")
+
+    @property
+    def fraction(self):
+        return self.frame / self.FRAMES
+
+
+@dataclass
+class LongSeries:
+    """Per-bin envelopes of one method's long run: t (bin starts), H~ min/max, the paper's volume
+    estimator min/max, and the max per bin of |det M - 1| and ||M^T J M - J||."""
+
+    label: str
+    t: list
+    H_min: list
+    H_max: list
+    vol_min: list
+    vol_max: list
+    det: list
+    symp: list
+    failure: str = ""
+
+    def arrays(self):
+        return {k: np.concatenate(getattr(self, k)) if getattr(self, k) else np.empty(0)
+                for k in ("t", "H_min", "H_max", "vol_min", "vol_max", "det", "symp")}
+
+
+def bin_reduce(values, width, op):
+    """op (np.minimum or np.maximum) over consecutive bins of `width` values."""
+    return op.reduceat(values, np.arange(0, len(values), width))
+
+
+def long_chunk(setup, h, steps, Z, PT, start, width):
+    """Advance the ensemble Z (member 0 the trajectory, 1.. the nearby states) by `steps` steps
+    from step `start`; returns (per-bin reductions or None, Z, PT, failure message)."""
+    failure = ""
+    try:
+        tr = simulate(setup, h, steps * h, z0=Z, stride=1, increments=True, t0=start * h, pt0=PT)
+    except RunError as err:
+        tr, failure = err.partial, str(err)
+    if len(tr.t) < 2:
+        return None, Z, PT, failure
+    try:
+        M = tangent_maps(tr)
+    except RunError as err:
+        return None, Z, PT, failure or str(err)
+    H = tr.H_ext[1:, 0]
+    vol = paper_volume_form(tr)
+    out = {
+        "t": tr.t[1:][::width],
+        "H_min": bin_reduce(H, width, np.minimum),
+        "H_max": bin_reduce(H, width, np.maximum),
+        "vol_min": bin_reduce(vol, width, np.minimum),
+        "vol_max": bin_reduce(vol, width, np.maximum),
+        "det": bin_reduce(det_deviation(M), width, np.maximum),
+        "symp": bin_reduce(symplecticity_defect(M), width, np.maximum),
+    }
+    return out, np.ascontiguousarray(tr.z[-1]), np.ascontiguousarray(tr.pt[-1]), failure
+
+
+def max_chunk(setup):
+    """Steps per chunk that keep one chunk's records and tangent maps under LONG_CHUNK_BYTES."""
+    m = 2 * setup.scene.ndof
+    members = m + 2
+    return max(1, LONG_CHUNK_BYTES // (members * (m + 1) * 3 * 8 + m * m * 8))
+
+
+class LongRun(param.Parameterized):
+    """A long run of the study's two methods, computed in chunks off the event loop, with
+    progress, cancellation and per-bin envelopes (at most LONG_BINS bins) as data arrives."""
+
+    study = param.ClassSelector(class_=Study)
+    T_long = param.Number(default=long_horizon("damped"), label="Long horizon T",
+                          doc="Horizon of the long run (chunked; capped at 1e8 steps).")
+    progress = param.Number(default=0.0, bounds=(0.0, 1.0), doc="Fraction of the steps done.")
+    running = param.Boolean(default=False)
+    status = param.String(default="", doc="What the run is doing or how it ended.")
+    data = param.Dict(default={}, doc="{label: envelope arrays and failure} of the run so far.")
+    setting = param.String(default="", doc="What is (or was last) run.")
+
+    def __init__(self, **params):
+        super().__init__(**params)
+        if "T_long" not in params:
+            self.T_long = long_horizon(self.study.scene)
+        self._cancel = False
+        self.study.param.watch(self._on_scene, ["scene"])
+
+    def _on_scene(self, event):
+        if not self.running:
+            self.T_long = long_horizon(self.study.scene)
+
+    def start(self):
+        """Validate and start (no-op while running); bad input becomes a message."""
+        if self.running:
+            return
+        s = self.study
+        try:
+            setups = s.setups()
+            steps = check_step(s.h, self.T_long)
+        except InputError as err:
+            s.say(Note("error", str(err)))
+            return
+        self._cancel = False
+        self.running = True
+        param.parameterized.async_executor(partial(self._run, setups, float(s.h), steps))
+
+    def cancel(self):
+        self._cancel = True
+
+    async def _run(self, setups, h, steps):
+        s = self.study
+        width = max(1, math.ceil(steps / LONG_BINS))
+        cap = width * max(1, min(max_chunk(x) for x in setups) // width)
+        labels = [method_label(x.method.name, x.theta) for x in setups]
+        values = ", ".join(f"{k} = {v}" for k, v in s.values.items())
+        self.setting = (f"{s.scene}: {' vs '.join(labels)}, h = {h:g}, T = {steps * h:g}"
+                        + (f", {values}" if values else ""))
+        series = [LongSeries(lab, [], [], [], [], [], [], []) for lab in labels]
+        states = []
+        for x in setups:
+            q0, p0 = x.scene.initial(x.values)
+            states.append((nearby_states(np.concatenate([q0, p0]), DELTA, 2 * x.scene.ndof + 1), None))
+        active = [True] * len(setups)
+        done = 0
+        chunk = min(cap, width * max(1, 4096 // width))
+        self.param.update(progress=0.0, data={}, status="running")
+        started = time.perf_counter()
+        try:
+            while done < steps and any(active) and not self._cancel:
+                n = min(chunk, steps - done)
+                tick = time.perf_counter()
+                running = [i for i, a in enumerate(active) if a]
+                outs = await asyncio.gather(*(asyncio.to_thread(long_chunk, setups[i], h, n, *states[i], done,
+                                                                width) for i in running))
+                for i, (red, Z, PT, failure) in zip(running, outs):
+                    states[i] = (Z, PT)
+                    if red is not None:
+                        for k, v in red.items():
+                            getattr(series[i], k).append(v)
+                    if failure:
+                        active[i] = False
+                        series[i].failure = failure
+                        s.say(Note("warning", f"long run, {labels[i]}: {failure}; showing data up to there"))
+                done += n
+                wall = time.perf_counter() - tick
+                chunk = min(cap, width * max(1, round(n * LONG_CHUNK_SECONDS / max(wall, 1e-3) / width)))
+                self.param.update(progress=done / steps,
+                                  data={x.label: {**x.arrays(), "failure": x.failure} for x in series})
+            elapsed = time.perf_counter() - started
+            if self._cancel:
+                self.status = f"cancelled at t = {done * h:.6g} after {elapsed:.1f} s"
+            elif not all(active):
+                self.status = f"stopped early (see the message) after {elapsed:.1f} s"
+            else:
+                self.status = f"done: {done} steps per method in {elapsed:.1f} s"
+        finally:
+            self.running = False

@@ -1,0 +1,34 @@
+"""Warm-up for `panel serve app --setup app/warmup.py`: before the first page, load (or, on a
+cold cache, compile) every compiled kernel the app can call, and import the plotting stack.
+
+The kernels are numba functions cached on disk (`__pycache__` beside cosymp's sources, or
+NUMBA_CACHE_DIR). On a warm cache this takes about two seconds; on a cold one (a fresh
+install, or after any change to cosymp's sources, which invalidates the cache) it compiles
+everything once, one to two minutes. Run `python app/warmup.py` to fill the cache ahead of time.
+"""
+import importlib
+import time
+
+
+def warm():
+    """Run every method on every scene it applies to (a few steps, with the tangent maps, the
+    carried loop and the exact flow that compare() uses), the gauge study, and import the
+    plotting modules the pages use. Returns the wall time in seconds."""
+    from cosymp.integrate import Setup
+    from cosymp.methods import METHODS
+    from cosymp.scenes import SCENES
+    from cosymp.study import compare, gauge_study
+
+    start = time.perf_counter()
+    for scene in SCENES.values():
+        for method in METHODS.values():
+            if method.refusal(scene) is None:
+                compare(Setup.make(scene, method.name), scene.h, 10 * scene.h, cloud_points=8)
+    gauge_study("midpoint", {}, SCENES["charged"].h, 10 * SCENES["charged"].h)
+    for module in ("holoviews.plotting.bokeh", "holoviews.operation.downsample", "tsdownsample"):
+        importlib.import_module(module)
+    return time.perf_counter() - start
+
+
+if __name__ in ("__main__", "panel_setup_module"):
+    print(f"cosymp app warm-up: kernels and plotting stack ready in {warm():.1f} s", flush=True)

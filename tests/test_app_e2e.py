@@ -1,0 +1,260 @@
+"""The app end to end: `panel serve app` on a free 127.0.0.1 port, driven by headless Chromium.
+
+Every page load records every request URL (none may leave 127.0.0.1) and every console error
+(there must be none), and saves a screenshot to tests/artifacts/.
+"""
+import json
+import os
+import pathlib
+import shutil
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+from urllib.parse import urlencode
+
+import pytest
+from playwright.sync_api import expect
+
+from cosymp.scenes import SCENES
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+ARTIFACTS = ROOT / "tests" / "artifacts"
+CHROMIUM = os.environ.get("COSYMP_CHROMIUM", "/usr/bin/chromium")
+CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                 "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+START_TIMEOUT_S = 300
+WAIT_MS = 20_000
+
+pytestmark = [
+    pytest.mark.skipif(not shutil.which(CHROMIUM), reason=f"no Chromium at {CHROMIUM} (apt-get install it)"),
+    pytest.mark.timeout(START_TIMEOUT_S + 120),
+]
+
+
+def free_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def server():
+    """`panel serve app --setup app/warmup.py` on a free port; yields its base URL."""
+    port = free_port()
+    ARTIFACTS.mkdir(exist_ok=True)
+    path = [str(ROOT)] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(path)}
+    with open(ARTIFACTS / "server.log", "w") as log:
+        proc = subprocess.Popen([sys.executable, "-m", "panel", "serve", "app", "--setup", "app/warmup.py",
+                                 "--address", "127.0.0.1", "--port", str(port),
+                                 "--allow-websocket-origin", f"127.0.0.1:{port}"],
+                                cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT)
+        try:
+            wait_until_serving(proc, port, log.name)
+            yield f"http://127.0.0.1:{port}/app"
+        finally:
+            proc.terminate()
+            try:
+                proc.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait(timeout=15)
+
+
+def wait_until_serving(proc, port, log_name):
+    deadline = time.monotonic() + START_TIMEOUT_S
+    while True:
+        if proc.poll() is not None:
+            pytest.fail(f"panel serve exited with {proc.returncode}; see {log_name}")
+        try:
+            with urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=5):
+                return
+        except OSError:
+            if time.monotonic() > deadline:
+                pytest.fail(f"panel serve did not answer within {START_TIMEOUT_S} s")
+            time.sleep(0.5)
+
+
+@pytest.fixture(scope="module")
+def browser():
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, timeout=60_000)
+        yield b
+        b.close()
+
+
+class Page:
+    """A browser page that records requests and console errors."""
+
+    def __init__(self, browser, base):
+        self.base = base
+        self.requests = []
+        self.errors = []
+        self.page = browser.new_page(viewport={"width": 1400, "height": 2000})
+        self.page.set_default_timeout(WAIT_MS)
+        self.page.on("request", lambda r: self.requests.append(r.url))
+        self.page.on("console", lambda m: m.type == "error" and self.errors.append(m.text))
+        self.page.on("pageerror", lambda e: self.errors.append(str(e)))
+
+    def open(self, query=""):
+        self.page.goto(self.base + query, wait_until="load")
+        self.page.wait_for_selector(".bk-tab.bk-active")
+        self.page.wait_for_selector("h2")
+
+    def shot(self, name):
+        self.page.screenshot(path=str(ARTIFACTS / f"{name}.png"))
+
+    def check(self):
+        local = ("http://127.0.0.1:", "ws://127.0.0.1:", "data:", "blob:")
+        outside = [u for u in self.requests if not u.startswith(local)]
+        assert outside == [], outside
+        assert self.errors == [], self.errors
+
+    def numbers(self):
+        """The numbers panel's text without its wall-time row."""
+        text = self.page.locator("table.numbers").first.inner_text()
+        return "\n".join(line for line in text.splitlines() if not line.startswith("time (s)"))
+
+    def plotted(self):
+        """A fingerprint of every plotted data column on the page (sum and length per source)."""
+        return self.page.evaluate("""() => {
+            const out = [];
+            for (const doc of Bokeh.documents) for (const m of doc.all_models) {
+                if (m.type !== "ColumnDataSource") continue;
+                const data = m.data instanceof Map ? Object.fromEntries(m.data) : m.data;
+                for (const [k, v] of Object.entries(data)) {
+                    if (!v || typeof v.length !== "number" || typeof v[0] !== "number") continue;
+                    let s = 0; for (let i = 0; i < v.length; i++) if (Number.isFinite(v[i])) s += v[i];
+                    out.push(k + ":" + v.length + ":" + s.toPrecision(12));
+                }
+            }
+            return out.sort().join("|");
+        }""")
+
+    def wait_for_numbers_change(self, before):
+        deadline = time.monotonic() + WAIT_MS / 1000
+        while self.numbers() == before:
+            assert time.monotonic() < deadline, "the numbers panel did not change"
+            self.page.wait_for_timeout(200)
+
+
+@pytest.fixture
+def page(browser, server):
+    p = Page(browser, server)
+    yield p
+    p.page.close()
+
+
+def query(**items):
+    return "?" + urlencode({k: v if isinstance(v, str) else json.dumps(v) for k, v in items.items()})
+
+
+def test_loads_with_the_paper_defaults_and_a_slider_updates_the_plots(page):
+    page.open()
+    page.page.wait_for_selector("table.numbers")
+    page.shot("01-default-page")
+    assert "Damped oscillator" in page.page.locator("h2").first.inner_text()
+    assert "steps\t500\t500" in page.numbers()
+    before_numbers, before_data = page.numbers(), page.plotted()
+    box = page.page.locator(".noUi-handle[aria-valuenow='0.2']").bounding_box()
+    x, y = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+    page.page.mouse.move(x, y)
+    page.page.mouse.down()
+    page.page.mouse.move(x + 60, y, steps=6)
+    page.page.mouse.up()
+    page.wait_for_numbers_change(before_numbers)
+    page.page.wait_for_timeout(1000)
+    assert page.plotted() != before_data
+    assert "gamma" in page.page.url
+    page.shot("02-after-gamma-slider")
+    page.check()
+
+
+def test_switching_scenes_rebuilds_controls_and_plots(page):
+    page.open()
+    page.page.locator("select").first.select_option(label=SCENES["charged"].title)
+    expect(page.page.locator("h2").first).to_contain_text("Charged particle")
+    expect(page.page.locator("table.numbers").first).to_contain_text("20000")
+    assert page.page.get_by_text("beta(t): 'paper', 'constant' or an expression of t").count() == 1
+    assert "scene=charged" in page.page.url
+    page.page.wait_for_timeout(1000)
+    page.shot("03-charged-compare")
+    page.check()
+
+
+def test_a_preset_link_opens_its_figure(page):
+    from app.presets import PRESETS
+    from app.state import LONG_URL_NAMES, URL_NAMES
+
+    kapitza = PRESETS[-1]
+    page.open(kapitza.query(URL_NAMES, LONG_URL_NAMES))
+    assert "Kapitza" in page.page.locator("h2").first.inner_text()
+    assert page.page.locator(".bk-tab.bk-active").inner_text() == "Play"
+    page.page.locator("button.first").click()
+    page.page.locator("button.play").click()
+    expect(page.page.locator("p.clock")).not_to_have_text("t = 0 of 20")
+    page.page.wait_for_timeout(1500)
+    page.page.locator("button.pause").click()
+    page.shot("04-kapitza-preset-play")
+    gauge = PRESETS[4]
+    page.open(gauge.query(URL_NAMES, LONG_URL_NAMES))
+    page.page.get_by_text("The paper's chi does not give the Lorenz condition").first.wait_for()
+    page.page.wait_for_timeout(1500)
+    page.shot("05-gauge-preset")
+    page.check()
+
+
+def test_a_bad_beta_is_a_notification_and_the_last_good_state_stays(page):
+    page.open(query(scene="charged"))
+    page.page.wait_for_selector("table.numbers")
+    before = page.numbers()
+    beta = page.page.locator("input[placeholder*='tanh(t)']")
+    beta.fill("0.05*(1 + sin(t)")
+    beta.press("Enter")
+    toast = page.page.locator(".notyf__toast").first
+    toast.wait_for()
+    assert "beta(t)" in toast.inner_text() and "parenthesis" in toast.inner_text()
+    page.page.wait_for_timeout(800)
+    page.shot("06-bad-beta-notification")
+    assert page.numbers() == before
+    beta.fill("paper")
+    beta.press("Enter")
+    h = page.page.locator("input.bk-input").first
+    h.fill("-1")
+    h.press("Enter")
+    page.page.locator(".notyf__toast", has_text="must be positive").first.wait_for()
+    assert page.numbers() == before
+    page.check()
+
+
+def test_a_long_run_starts_shows_progress_and_cancels(page):
+    page.open(query(scene="damped", method="symplectic-euler", p={"gamma": 0.0002}, view="long", T_long=5e5))
+    page.page.locator("button", has_text="Start long run").click()
+    page.page.get_by_text("running").first.wait_for()
+    expect(page.page.locator(".colorkey").last).to_contain_text("rk4")
+    page.page.wait_for_timeout(1500)
+    page.shot("07-long-run-running")
+    clicked = time.monotonic()
+    page.page.locator("button", has_text="Cancel").click()
+    page.page.get_by_text("cancelled at t =").first.wait_for(timeout=10_000)
+    assert time.monotonic() - clicked < 10
+    page.page.locator(".bk-tab", has_text="Orbits").click()
+    page.page.wait_for_selector("table.numbers")
+    page.shot("08-long-run-cancelled-then-compare")
+    page.check()
+
+
+def test_theta_lesson_and_shared_link(page):
+    page.open(query(scene="decaying", view="theta", theta=0.3))
+    page.page.get_by_text("theta-naive").first.wait_for()
+    page.page.wait_for_timeout(2000)
+    page.shot("09-theta-lesson")
+    assert "theta=0.3" in page.page.url and "view=theta" in page.page.url
+    link = page.page.url
+    page.open(link.split("/app", 1)[1])
+    assert page.page.locator(".bk-tab.bk-active").inner_text() == "Theta lesson"
+    page.check()

@@ -1,0 +1,231 @@
+"""The app's state objects and element builders, without a server or a browser."""
+import json
+import pathlib
+import re
+from urllib.parse import parse_qsl, urlsplit
+
+import holoviews as hv
+import numpy as np
+import pytest
+
+from app import views
+from app.presets import PRESETS
+from app.state import LONG_URL_NAMES, URL_NAMES, GaugeStudy, LongRun, Study, ThetaLesson
+from cosymp.scenes import SCENES
+
+APP = pathlib.Path(__file__).resolve().parent.parent / "app"
+
+
+@pytest.fixture(scope="module", autouse=True)
+def plotting_backend():
+    hv.extension("bokeh")
+
+
+def curve_data(overlay):
+    """The (x, y) arrays of every curve of an overlay, concatenated."""
+    return np.concatenate([np.concatenate([el.dimension_values(0), el.dimension_values(1)])
+                           for el in overlay if len(el)])
+
+
+def test_a_parameter_change_changes_the_plotted_data():
+    s = Study()
+    before = curve_data(views.energy(s.results))
+    phase_before = curve_data(views.phase(s.results, views.phase_axes("damped")[0]))
+    s.inputs.gamma = 0.3
+    assert s.values == {"gamma": 0.3}
+    assert s.results.entries[0].comparison.setup.values["gamma"] == 0.3
+    after = curve_data(views.energy(s.results))
+    assert before.shape != after.shape or not np.allclose(before, after)
+    assert not np.allclose(phase_before, curve_data(views.phase(s.results, views.phase_axes("damped")[0])))
+
+
+def test_values_and_inputs_follow_each_other():
+    s = Study()
+    s.values = {"gamma": -0.1, "q0": 2.0}
+    assert (s.inputs.gamma, s.inputs.q0) == (-0.1, 2.0)
+    assert s.results.entries[0].comparison.run.q[0, 0, 0] == 2.0
+    s.inputs.q0 = 1.0
+    assert s.values == {"gamma": -0.1}
+
+
+def test_switching_scenes_rebuilds_the_controls():
+    s = Study()
+    s.values = {"gamma": 0.3}
+    s.scene = "charged"
+    names = [p.name for p in SCENES["charged"].params]
+    assert [n for n in s.inputs.param if n != "name"] == names
+    assert (s.h, s.T, s.values) == (SCENES["charged"].h, SCENES["charged"].T, {})
+    widgets = views.scene_widgets(s.inputs)
+    labels = [w.name for w in widgets]
+    assert len(labels) == len(names) and labels[5].startswith("beta(t)") and labels[6] == "gauge"
+    assert s.results.scene == "charged" and s.shown == "charged/sparse"
+    assert len(views.phase_axes("charged")) == 3
+
+
+def test_a_scene_without_the_method_falls_back_and_says_so():
+    s = Study(scene="charged", method="boris")
+    assert s.results.entries[0].method == "boris"
+    s.scene = "damped"
+    assert s.method == "midpoint" and s.message.level == "info" and "boris" in s.message.text
+    assert s.results.scene == "damped"
+
+
+@pytest.mark.parametrize("change, needle", [
+    ({"values": {"beta": "sin(t"}}, "beta(t)"),
+    ({"h": -0.1}, "h > 0"),
+    ({"h": 0.0}, "h > 0"),
+    ({"T": 1e4}, "live views' limit"),
+    ({"T": 1e6}, "cap of 1e+08"),
+    ({"method": "exact"}, "closed-form flow"),
+    ({"values": {"B0": 1e9}}, "outside"),
+])
+def test_bad_input_keeps_the_last_good_state_and_says_what_to_change(change, needle):
+    s = Study(scene="charged")
+    good = s.results
+    s.param.update(**change)
+    assert s.results is good
+    assert s.message.level == "error" and needle in s.message.text
+
+
+def test_a_repeated_error_is_posted_again():
+    s = Study(scene="charged")
+    seen = []
+    s.param.watch(lambda e: seen.append(e.new.text), "message")
+    s.inputs.beta = "sin("
+    s.inputs.eps = 5.0
+    assert len(seen) == 2 and all("beta(t)" in t for t in seen)
+    s.inputs.beta = "0.05*(1 + tanh(t))"
+    assert s.results.entries[0].comparison.setup.values["beta"] == "0.05*(1 + tanh(t))"
+
+
+def test_a_failing_run_shows_its_data_up_to_the_failure_time():
+    s = Study(scene="kapitza")
+    s.h = 0.3
+    entry = s.results.entries[0]
+    assert "Newton" in entry.failure and "reduce h" in entry.failure
+    assert s.message.level == "warning" and "showing data up to t = 0.3" in s.message.text
+    assert entry.comparison.run.t[-1] == pytest.approx(0.3)
+    rk4 = s.results.entries[1]
+    assert rk4.failure == "" and rk4.comparison.run.t[-1] == pytest.approx(20.1)
+
+
+@pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
+def test_an_overflowing_run_says_when():
+    s = Study(T=5000.0)
+    for e in s.results.entries:
+        assert "overflow" in e.failure
+        t_end = e.comparison.run.t[-1]
+        assert 3000 < t_end < 5000 and f"{t_end:.6g}" in e.failure
+
+
+def test_numbers_panel_is_the_full_resolution_summary():
+    s = Study(scene="charged")
+    html = views.numbers_html(s.results)
+    c = s.results.entries[0].comparison
+    assert f"{c.summary['max |H + p_t|']:.3e}" in html and ">20000<" in html
+
+
+def test_series_are_downsampled_and_dense_portraits_rasterized():
+    s = Study(scene="charged")
+    dmap = views.live(views.figures()["energy"], s.param.results)
+    overlay = dmap.callback.callable()
+    assert len(s.results.entries[0].comparison.run.t) == 20001
+    assert all(len(curve) <= views.DOWNSAMPLE_WIDTH for curve in overlay)
+    s.T = 200.0
+    assert s.shown == "charged/dense"
+    phase = views.phase(s.results, views.phase_axes("charged")[0], dense=True)
+    assert [type(el).__name__ for el in phase] == ["RGB", "RGB", "Scatter", "Scatter"]
+
+
+def test_theta_lesson_shows_lifted_symplectic_for_every_theta_and_naive_only_at_half():
+    s = Study(view="theta", theta=0.3)
+    lesson = ThetaLesson(study=s)
+    lifted, naive = (e.comparison for e in lesson.results.entries)
+    assert np.max(lifted.det_dev) < 1e-12 and np.max(naive.det_dev) > 1e-6
+    assert abs(lifted.cloud_area[-1] - 1) < 1e-9 and abs(naive.cloud_area[-1] - 1) > 1e-6
+    sweep = lesson.sweep
+    half = np.argmin(np.abs(sweep["thetas"] - 0.5))
+    assert np.all(sweep["theta"]["det"] < 1e-12)
+    assert sweep["theta-naive"]["det"][half] < 1e-12
+    assert np.all(np.delete(sweep["theta-naive"]["det"], half) > 1e-8)
+    s.theta = 0.7
+    assert lesson.results.entries[0].comparison.setup.theta == 0.7
+
+
+def test_theta_lesson_waits_until_it_is_shown():
+    s = Study()
+    lesson = ThetaLesson(study=s)
+    assert lesson.results is None
+    s.view = "theta"
+    assert lesson.results is not None
+
+
+def test_gauge_study_gives_every_gauge_and_invariant_transported_observables():
+    s = Study(scene="charged", method="symplectic-euler", view="gauges")
+    g = GaugeStudy(study=s)
+    assert set(g.results) == {"original", "coulomb", "symmetric", "landau", "lorenz"}
+    _, q0, p0, Pi0 = g.results["original"]["transported"]
+    for runs in g.results.values():
+        _, q, _, Pi = runs["transported"]
+        assert np.max(np.abs(q - q0)) < 1e-12 and np.max(np.abs(Pi - Pi0)) < 1e-9
+    assert np.max(np.abs(g.results["coulomb"]["per-gauge"][2] - p0)) > 1e-3
+    assert len(views.gauge_plot(g.results, "per-gauge", "diff")) == 4
+
+
+def test_long_run_in_chunks_matches_the_one_shot_run_and_can_be_cancelled():
+    s = Study(values={"gamma": 0.0002})
+    lr = LongRun(study=s, T_long=2000.0)
+    lr.start()
+    assert lr.status.startswith("done") and lr.progress == 1.0 and not lr.running
+    data = lr.data
+    assert set(data) == {"midpoint", "rk4"}
+    one_shot = Study(values={"gamma": 0.0002}, T=2000.0).results
+    for e in one_shot.entries:
+        d = data[e.label]
+        H = e.comparison.run.H_ext[1:, 0]
+        assert d["H_max"].max() == pytest.approx(H.max(), rel=1e-6, abs=1e-12)
+        assert d["det"].max() == pytest.approx(e.comparison.det_dev.max(), rel=1e-6, abs=1e-15)
+    lr2 = LongRun(study=s, T_long=2e5)
+    lr2.param.watch(lambda e: lr2.cancel(), "progress")
+    lr2.start()
+    assert lr2.status.startswith("cancelled") and 0 < lr2.progress < 1
+
+
+def test_long_run_of_a_diverging_setup_stops_with_data_up_to_there():
+    s = Study()
+    lr = LongRun(study=s, T_long=1e4)
+    lr.start()
+    assert lr.status.startswith("stopped early")
+    for d in lr.data.values():
+        assert "overflow" in d["failure"] and 3000 < d["t"][-1] < 4000
+    assert s.message.level == "warning" and "long run" in s.message.text
+
+
+def test_long_run_refuses_a_horizon_over_the_cap():
+    s = Study()
+    lr = LongRun(study=s, T_long=1e8)
+    lr.start()
+    assert not lr.running and lr.data == {} and "cap" in s.message.text
+
+
+def test_presets_open_their_figures():
+    for preset in PRESETS:
+        query = dict(parse_qsl(urlsplit(preset.query(URL_NAMES, LONG_URL_NAMES)).query))
+        state = {k: query[u] if k in ("scene", "method", "other", "view") else json.loads(query[u])
+                 for k, u in URL_NAMES.items() if u in query}
+        s = Study(**state)
+        assert s.message is None, preset.name
+        assert all(e.failure == "" for e in s.results.entries), preset.name
+        assert s.values == preset.state["values"]
+    assert Study(**PRESETS[-1].state).results.entries[0].comparison.run.q[:, 0, 0].min() > 2.5
+
+
+def test_a_bad_link_value_is_refused_with_a_message():
+    s = Study(scene="charged", values={"gauge": "nope"})
+    assert s.values == {} and s.message.level == "error" and "gauge" in s.message.text
+
+
+def test_no_numba_function_is_defined_in_the_app():
+    for path in APP.glob("*.py"):
+        jit = re.search(r"^\s*(import numba|from numba|@(numba\.)?n?jit)", path.read_text(), re.MULTILINE)
+        assert jit is None, path.name
