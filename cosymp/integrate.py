@@ -66,7 +66,7 @@ class Setup:
 
 @dataclass
 class Trajectory:
-    """Recorded states of N trajectories: t (K,), q and p (K, N, n), pt and H (K, N).
+    """Recorded states of N trajectories: t (K,), z = (q, p) (K, N, 2n), pt and H (K, N).
 
     H_ext = H + p_t is the extended Hamiltonian (0 at the start by the convention
     p_t(0) = -H(z0, 0)). `steps` were completed with step h; record j is step j*stride.
@@ -77,8 +77,7 @@ class Trajectory:
     h: float
     stride: int
     t: np.ndarray
-    q: np.ndarray
-    p: np.ndarray
+    z: np.ndarray
     pt: np.ndarray
     H: np.ndarray
     steps: int
@@ -88,12 +87,16 @@ class Trajectory:
     extra: dict = field(default_factory=dict)
 
     @property
-    def H_ext(self):
-        return self.H + self.pt
+    def q(self):
+        return self.z[..., : self.setup.scene.ndof]
 
     @property
-    def z(self):
-        return np.concatenate([self.q, self.p], axis=-1)
+    def p(self):
+        return self.z[..., self.setup.scene.ndof:]
+
+    @property
+    def H_ext(self):
+        return self.H + self.pt
 
     @property
     def t_final(self):
@@ -162,10 +165,9 @@ def simulate(setup, h, T, z0=None, stride=None, increments=False, t0=0.0, pt0=No
 
 
 def _trajectory(setup, h, stride, T, Z, PT, dZ, steps, wall):
-    n = setup.scene.ndof
     H = np.empty(PT.shape)
     energies(setup.P, T, Z, H)
-    return Trajectory(setup, h, stride, T, Z[..., :n], Z[..., n:], PT, H, steps, wall, dZ)
+    return Trajectory(setup, h, stride, T, Z, PT, H, steps, wall, dZ)
 
 
 def failure_message(status, step, t, h):

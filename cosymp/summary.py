@@ -1,10 +1,12 @@
 """Whole-run figures (maxima over every step), computed chunk by chunk in bounded memory."""
+import dataclasses
 import time
 
 import numpy as np
 
 from .diagnostics import det_deviation, symplecticity_defect, tangent_maps
 from .integrate import Setup, check_step, simulate
+from .kernels.loops import energies
 from .reference import reference_final
 from .scenes import charged
 
@@ -23,11 +25,8 @@ def transport(traj, target):
     q, p, pt = charged.gauge_map(target.P, t, q, p, pt)
     z = np.ascontiguousarray(np.concatenate([q, p], axis=-1))
     H = np.empty(pt.shape)
-    from .kernels.loops import energies
-
     energies(target.P, np.ascontiguousarray(t), z, H)
-    out = type(traj)(**{**traj.__dict__, "setup": target, "p": p, "pt": pt, "H": H})
-    return out
+    return dataclasses.replace(traj, setup=target, z=z, pt=pt, H=H)
 
 
 def transported_maps(M, src, target, t, h):

@@ -3,9 +3,10 @@
 Numba stamps a cached function with its own file only, but our generic loops (loops.py) inline
 code from scene and family modules: editing a scene must not leave a stale compiled loop
 behind. This locator wraps numba's usual choice for files of this package and replaces the
-stamp with one covering all of the package's sources (their sizes and modification times).
+stamp with a hash of all of the package's sources.
 """
 import functools
+import hashlib
 import pathlib
 
 from numba.core import caching
@@ -17,8 +18,13 @@ PACKAGE = pathlib.Path(__file__).resolve().parent.parent
 
 @functools.cache
 def package_stamp():
-    files = sorted(PACKAGE.rglob("*.py"))
-    return tuple((str(f.relative_to(PACKAGE)), f.stat().st_mtime_ns, f.stat().st_size) for f in files)
+    """SHA-256 of every source file of the package (contents, not times: a checkout or a copy
+    that leaves the sources unchanged keeps the cache)."""
+    digest = hashlib.sha256()
+    for f in sorted(PACKAGE.rglob("*.py")):
+        digest.update(str(f.relative_to(PACKAGE)).encode())
+        digest.update(f.read_bytes())
+    return digest.hexdigest()
 
 
 class PackageStampLocator:
