@@ -365,26 +365,22 @@ class Study(Derived):
             self.say(note)
 
 
-class ThetaLesson(Derived):
-    """The lifted theta-method against the naive one at the study's θ, on the study's scene,
-    and a θ sweep of their one-step defects (max over the first SWEEP_STEPS steps)."""
+class Follower(Derived):
+    """A derived view of a Study: recomputed when the study's WATCHED inputs change, while
+    `active` (its tab is shown); its notes go to the study's."""
 
     study = param.ClassSelector(class_=Study)
-    results = param.ClassSelector(class_=Runs, doc="Lifted and naive runs at the study's θ.")
-    sweep = param.Dict(default=None, allow_None=True,
-                       doc="'thetas', and per method name {'det': max |det M - 1|, 'symp': max "
-                           "|M^T J M - J|} at each θ.")
+    WATCHED = ()
 
     def __init__(self, **params):
         super().__init__(**params)
-        self._sweep_key = None
-        self.study.param.watch(self._on_study, ["scene", "theta", "h", "T", "values", "view"])
+        self.study.param.watch(self._on_study, list(self.WATCHED))
         if self.active:
             self.refresh()
 
     @property
     def active(self):
-        return self.study.view == "theta"
+        raise NotImplementedError
 
     def _say(self, note):
         self.study.say(note)
@@ -392,6 +388,25 @@ class ThetaLesson(Derived):
     def _on_study(self, *events):
         if self.active:
             self._schedule()
+
+
+class ThetaLesson(Follower):
+    """The lifted theta-method against the naive one at the study's θ, on the study's scene,
+    and a θ sweep of their one-step defects (max over the first SWEEP_STEPS steps)."""
+
+    WATCHED = ("scene", "theta", "h", "T", "values", "view")
+    results = param.ClassSelector(class_=Runs, doc="Lifted and naive runs at the study's θ.")
+    sweep = param.Dict(default=None, allow_None=True,
+                       doc="'thetas', and per method name {'det': max |det M - 1|, 'symp': max "
+                           "|M^T J M - J|} at each θ.")
+
+    def __init__(self, **params):
+        self._sweep_key = None
+        super().__init__(**params)
+
+    @property
+    def active(self):
+        return self.study.view == "theta"
 
     def _job(self):
         s = self.study
@@ -435,30 +450,17 @@ def theta_sweep(setups, h, T):
     return out
 
 
-class GaugeStudy(Derived):
+class GaugeStudy(Follower):
     """The charged particle in all five gauges with the study's method, h, T and parameters."""
 
-    study = param.ClassSelector(class_=Study)
+    WATCHED = ("scene", "method", "theta", "h", "T", "values", "view")
     results = param.Dict(default=None, allow_None=True,
                          doc="{gauge: {'per-gauge': (t, q, p, Pi), 'transported': ...}}.")
     method = param.String(default="", doc="The method of the results.")
 
-    def __init__(self, **params):
-        super().__init__(**params)
-        self.study.param.watch(self._on_study, ["scene", "method", "theta", "h", "T", "values", "view"])
-        if self.active:
-            self.refresh()
-
     @property
     def active(self):
         return self.study.view == "gauges" and self.study.scene == "charged"
-
-    def _say(self, note):
-        self.study.say(note)
-
-    def _on_study(self, *events):
-        if self.active:
-            self._schedule()
 
     def _job(self):
         s = self.study
