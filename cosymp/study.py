@@ -22,6 +22,7 @@ from .diagnostics import (
 )
 from .integrate import Setup, check_step, initial_states, simulate
 from .scenes import charged
+from .summary import transport
 
 
 @dataclass
@@ -99,8 +100,6 @@ def compare(setup, h, T, delta=1e-4, cloud_points=0, cloud_radius=0.05, stride=N
 def gauge_study(method, values, h, T, theta=None):
     """The charged particle in all five gauges: per-gauge runs (the method applied in each gauge)
     and transported runs (the original-gauge run mapped by G_chi), with q, p and Pi each."""
-    from .summary import transport
-
     out = {}
     base = Setup.make("charged", method, {**values, "gauge": "original"}, theta)
     source = simulate(base, h, T)
