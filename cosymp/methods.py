@@ -68,6 +68,14 @@ def _gauss4():
     return Gauss(_floats(A), _floats([0.5, 0.5]), _floats([0.5 - r, 0.5 + r]))
 
 
+def _gauss6():
+    r = math.sqrt(15.0)
+    A = np.array([[5 / 36, 2 / 9 - r / 15, 5 / 36 - r / 30],
+                  [5 / 36 + r / 24, 2 / 9, 5 / 36 - r / 24],
+                  [5 / 36 + r / 30, 2 / 9 + r / 15, 5 / 36]])
+    return Gauss(_floats(A), _floats([5 / 18, 4 / 9, 5 / 18]), _floats([0.5 - r / 10, 0.5, 0.5 + r / 10]))
+
+
 @dataclass(frozen=True)
 class Method:
     """A named method. `build(theta)` gives the family data the kernels run."""
@@ -148,6 +156,8 @@ METHODS = {m.name: m for m in (
            "symplectic only at theta = 1/2", 1, "symplectic", _naive, takes_theta=True),
     Method("gauss4", "Gauss-Legendre 4", "2-stage Gauss-Legendre collocation, order 4, symplectic",
            4, "symplectic", _gauss4),
+    Method("gauss6", "Gauss-Legendre 6", "3-stage Gauss-Legendre collocation, order 6, symplectic; three "
+           "evaluations per step where the order-6 composition needs nine", 6, "symplectic", _gauss6),
     Method("composition4", "Midpoint triple jump (order 4)", "symmetric composition of 3 midpoint "
            "steps (Yoshida's triple jump)", 4, "symplectic", lambda: _composition(_TJ4)),
     Method("composition6", "Midpoint composition (order 6)", "the triple jump applied to the order-4 "
