@@ -1,4 +1,4 @@
-"""The `cosymp` command line: run, scenes, methods, bench.
+"""The `cosymp` command line: run, scenes, methods, workprecision, bench.
 
 Exit codes: 0 done, 2 bad input (one line on stderr saying what to change), 3 a run that
 could not go on (overflow, Newton), also one line.
@@ -47,6 +47,24 @@ def parser():
                    help="a scene parameter, e.g. --set gamma=0.5 or --set 'beta=0.05*(1+tanh(t))'")
     r.add_argument("--no-error", action="store_true", help="skip the reference solution")
     r.add_argument("--json", action="store_true", help="print one JSON object")
+    w = sub.add_parser("workprecision", help="error against cost for the methods (and scipy's solvers) on one "
+                       "scene; --long: error and H + p_t drift as T grows")
+    w.add_argument("scene")
+    w.add_argument("--methods", nargs="+", help="methods to compare (default: all that apply)")
+    w.add_argument("--peers", action="store_true", help="add scipy solve_ivp RK45, DOP853 and LSODA at rtol = atol "
+                   "from 1e-3 to 1e-13")
+    w.add_argument("--T", type=_number, help="horizon (default: the scene's paper value)")
+    w.add_argument("--h", type=_number, nargs="+", help="step sizes (default: refine from the scene's time "
+                   "scale by sqrt(2) until the round-off floor or --max-steps); with --long, one step size")
+    w.add_argument("--theta", type=_number, help="theta for theta and theta-naive")
+    w.add_argument("--set", type=_assignment, action="append", default=[], metavar="NAME=VALUE",
+                   help="a scene parameter, e.g. --set gamma=2e-4")
+    w.add_argument("--max-steps", type=int, default=1 << 20, help="largest step count per run (default 2^20)")
+    w.add_argument("--budget", type=_number, default=0.2, help="seconds of timed repeats per run (default 0.2)")
+    w.add_argument("--long", action="store_true", help="long horizons: each method at one h (default the "
+                   "scene's) to T = 1e2 ... 1e6 (at most 1e7 steps)")
+    w.add_argument("--horizons", type=_number, nargs="+", help="horizons for --long")
+    w.add_argument("--out", help="write every run as tidy data to FILE.csv or FILE.json")
     sub.add_parser("scenes", help="list the scenes with their parameters and defaults")
     sub.add_parser("methods", help="list the methods")
     b = sub.add_parser("bench", help="ns/step per scene and method against a C -O3 loop")
@@ -95,6 +113,88 @@ def _run(args, out):
     out.write("\n".join(lines) + "\n")
 
 
+def _workprecision(args, out, err):
+    from . import workprecision as wp
+    from .integrate import MAX_STEPS, check_step
+    from .progress import Bar
+
+    if args.out and not args.out.endswith((".csv", ".json")):
+        raise InputError(f"--out {args.out}: name a .csv or .json file")
+    if not 1 <= args.max_steps <= MAX_STEPS:
+        raise InputError(f"--max-steps {args.max_steps} must be between 1 and {MAX_STEPS:.0e}")
+    if not (math.isfinite(args.budget) and args.budget > 0):
+        raise InputError(f"--budget {args.budget} must be a positive number of seconds")
+    if args.long and args.peers:
+        raise InputError("--peers compares costs at one horizon: drop it with --long")
+    values = dict(args.set)
+    bar = Bar(err)
+    try:
+        if args.long:
+            if args.h is not None and len(args.h) != 1:
+                raise InputError("--long runs every method at one step size: pass one --h")
+            for T in args.horizons or ():
+                check_step(T, T)
+            rows = wp.drift(args.scene, args.methods or wp.DRIFT_METHODS, values, None if args.h is None else args.h[0],
+                            args.horizons, args.theta, progress=bar)
+        else:
+            rows = wp.measure(args.scene, args.methods, values, args.T, args.h, args.theta, args.peers,
+                              max_steps=args.max_steps, budget=args.budget, progress=bar)
+    finally:
+        bar.close()
+    if args.out:
+        wp.write_rows(rows, args.out, wp.DRIFT_FIELDS if args.long else wp.ROW_FIELDS)
+    out.write(_drift_table(rows) if args.long else _cost_table(rows))
+    if args.out:
+        out.write(f"{len(rows)} runs written to {args.out}\n")
+
+
+def _cost_table(rows):
+    from .workprecision import targets
+
+    t = targets(rows)
+    first = rows[0]
+    lines = [f"{first['scene']} to T = {first['T']:g}; error = |z - z_ref| / |z_ref| at T, z_ref: {first['reference']}"
+             + (f" (uncertainty {first['reference_uncertainty']:.1e})" if first["reference_uncertainty"] else ""),
+             (f"{'solver':18s} {'runs':>4s} {'failed':>6s} {'best error':>10s} {'s to 1e-6':>10s} "
+              f"{'s to 1e-9':>10s} {'max|H~|':>9s} {'max|detM-1|':>11s}")]
+    for solver, c6 in t["cost"][1e-6].items():
+        mine = [r for r in rows if r["solver"] == solver]
+        ok = [r for r in mine if r["error"] == r["error"]]
+        best = min(ok, key=lambda r: r["error"]) if ok else None
+        lines.append(f"{solver:18s} {len(mine):4d} {len(mine) - len(ok):6d} "
+                     f"{best['error'] if best else math.nan:10.2e} {c6:10.2e} {t['cost'][1e-9][solver]:10.2e} "
+                     f"{max((r['H_ext_max_abs'] for r in ok), default=math.nan):9.1e} "
+                     f"{max((r['det_max_dev'] for r in ok), default=math.nan):11.1e}")
+    for e, r in t["ratios"].items():
+        lines.append(f"at error {e:.0e}: fastest cosymp method {r['fastest']}; scipy DOP853 / fastest = "
+                     f"{r['dop853_over_fastest']:.3g}; best symplectic ({r['best_symplectic']}) / rk4 = "
+                     f"{r['symplectic_over_rk4']:.3g}")
+    return "\n".join(lines) + "\n"
+
+
+def _drift_table(rows):
+    from .workprecision import growth_exponent
+
+    horizons = sorted({r["T"] for r in rows})
+    shown = [T for T in horizons if math.log10(T) % 1 < 1e-9] or horizons
+    first = rows[0]
+    lines = [(f"{first['scene']}: relative error at T and max |H + p_t| up to T, one step size per method; "
+              f"reference: {first['reference']}"),
+             f"{'solver':18s} {'h':>7s} " + " ".join(f"{f'err T={T:g}':>11s}" for T in shown)
+             + f" {'err slope':>9s} {'max|H~|':>9s} {'H~ slope':>8s}"]
+    for solver in dict.fromkeys(r["solver"] for r in rows):
+        mine = {r["T"]: r for r in rows if r["solver"] == solver}
+        last = mine[horizons[-1]]
+        lines.append(f"{solver:18s} {last['h']:7.3g} " + " ".join(f"{mine[T]['error']:11.2e}" for T in shown)
+                     + f" {growth_exponent(rows, solver):9.2f} {last['H_ext_max_abs']:9.1e} "
+                     f"{growth_exponent(rows, solver, 'H_ext_max_abs'):8.2f}")
+        if last["status"] != "ok":
+            lines.append(f"  {solver}: {last['status']}")
+    lines.append("slope: fitted exponent of T over the horizons where the error is below 0.1 (1 = linear growth, "
+                 "2 = quadratic); nan: fewer than 3 such horizons")
+    return "\n".join(lines) + "\n"
+
+
 def _fmt(v):
     return "(" + ", ".join(f"{x:.6g}" for x in v) + ")"
 
@@ -130,6 +230,8 @@ def main(argv=None, out=None, err=None):
             _scenes(out)
         elif args.command == "methods":
             _methods(out)
+        elif args.command == "workprecision":
+            _workprecision(args, out, err)
         else:
             from .bench import bench
 

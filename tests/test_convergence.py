@@ -6,8 +6,8 @@ regime) and must be within 0.3 of the declared order.
 """
 import numpy as np
 import pytest
-from conftest import case_id, pairs, setup
 
+from conftest import case_id, pairs, setup
 from cosymp.integrate import simulate
 from cosymp.methods import METHODS
 from cosymp.reference import scipy_reference

@@ -1,0 +1,425 @@
+"""Work against precision: what each method costs for the error and the invariants it delivers.
+
+`measure` runs cosymp's methods over step sizes and, with `peers=True`, scipy's `solve_ivp`
+(RK45, DOP853, LSODA) over tolerances, on one scene to one horizon, and returns tidy rows
+(one per run, ROW_FIELDS). `drift` runs each method at one step size to growing horizons and
+returns the error and |H + p_t| as T grows. A run that fails (overflow, Newton, a peer that
+gives up) is a row with NaN figures and its message in `status`.
+
+Definitions (also the CSV's):
+- error: ||z(T) - z_ref(T)|| / ||z_ref(T)|| over z = (q, p); error_abs without the division.
+  z_ref: the scene's exact flow, else scipy DOP853 at rtol = atol = 1e-13, computed once per
+  call; reference_uncertainty is its distance from cosymp's rk8 at a fine step (0 for a flow).
+- wall_s: the minimum over repeats of one call (cosymp's `simulate` recording the final state,
+  or `solve_ivp`), after one untimed warm-up call (which also compiles), repeated while the
+  repeats take under `budget` seconds in all (at most MAX_REPEATS).
+- rhs_evals: vector-field evaluations (scipy's nfev; stages x steps for explicit methods);
+  for implicit methods on linear scenes the stage evaluations of the time coefficients (one
+  linear solve per step), NaN where a Newton iteration makes it run-dependent (nonlinear scenes).
+- H_ext_max_abs: max |H + p_t| over every step (cosymp) or every accepted step (peers).
+- det_max_dev: max |det M_k - 1| of the one-step tangent maps over every step, or over
+  DIAG_MAPS evenly spaced steps for longer runs; NaN for peers (no step map to differentiate).
+"""
+import csv
+import dataclasses
+import json
+import math
+import time
+
+import numpy as np
+
+from .diagnostics import det_deviation, tangent_maps
+from .errors import InputError, RunError
+from .integrate import Setup, check_step, get_scene, initial_states, simulate
+from .kernels.families import Composition, Exact, Explicit, Gauss
+from .kernels.loops import energies, vector_field
+from .methods import METHODS
+from .methods import method as get_method
+
+ROW_FIELDS = ("scene", "solver", "kind", "order", "preserves", "h", "rtol", "T", "steps", "rhs_evals",
+              "wall_s", "error", "error_abs", "H_ext_max_abs", "det_max_dev", "reference",
+              "reference_uncertainty", "status")
+DRIFT_FIELDS = ("scene", "solver", "order", "preserves", "h", "T", "steps", "error", "error_abs",
+                "H_ext_abs", "H_ext_max_abs", "reference", "reference_uncertainty", "status")
+PEERS = ("RK45", "DOP853", "LSODA")
+PEER_RTOLS = tuple(10.0 ** -k for k in range(3, 14))
+DEFAULT_METHODS = ("euler", "rk4", "rk8", "midpoint", "symplectic-euler", "gauss4", "gauss6",
+                   "composition4", "composition6", "boris")
+DRIFT_METHODS = ("rk4", "midpoint", "symplectic-euler", "gauss4", "gauss6")
+DRIFT_HORIZONS = tuple(float(m * 10 ** e) for e in range(2, 6) for m in (1, 2, 5)) + (1e6,)
+DRIFT_MAX_STEPS = 10_000_000
+MAX_REPEATS = 7
+DIAG_MAPS = 1 << 16
+CHUNK = 1 << 18
+ERROR_FLOOR = 1e-13
+STEP_GROWTH = math.sqrt(2.0)
+
+
+def _setups(scene, methods, values, theta):
+    scene = get_scene(scene) if isinstance(scene, str) else scene
+    names = [m for m in DEFAULT_METHODS if METHODS[m].refusal(scene) is None] if methods is None else list(methods)
+    if not names:
+        raise InputError("no methods given: pass at least one method name")
+    return scene, [Setup.make(scene, m, values, theta if get_method(m).takes_theta else None)
+                   for m in dict.fromkeys(names)]
+
+
+def solver_name(setup):
+    return setup.method.name + (f"({setup.theta:g})" if setup.theta is not None else "")
+
+
+def rhs_per_step(setup):
+    """Vector-field evaluations per step (see the module's definitions), NaN if run-dependent."""
+    D = setup.data
+    if isinstance(D, Explicit):
+        return float(len(D.b))
+    if isinstance(D, Exact) or not setup.scene.kernel.linear:
+        return math.nan
+    if isinstance(D, Composition):
+        return float(len(D.gammas))
+    if isinstance(D, Gauss):
+        return float(len(D.b))
+    return 1.0
+
+
+def timed(call, budget):
+    """(result of the warm-up call, minimum wall time of the repeats after it)."""
+    result = call()
+    best = math.inf
+    spent = 0.0
+    for _ in range(MAX_REPEATS):
+        start = time.perf_counter()
+        call()
+        took = time.perf_counter() - start
+        best = min(best, took)
+        spent += took
+        if spent >= budget:
+            break
+    return result, best
+
+
+def _relative(z, z_ref):
+    err = float(np.linalg.norm(z - z_ref))
+    return err / max(float(np.linalg.norm(z_ref)), np.finfo(float).tiny), err
+
+
+def _extended_rhs(P, m):
+    def f(t, y):
+        out = np.empty(m + 1)
+        vector_field(P, t, np.ascontiguousarray(y[:m]), out)
+        return out
+    return f
+
+
+def _extended_start(setup):
+    z0 = initial_states(setup)
+    H0 = np.empty((1, 1))
+    energies(setup.P, np.zeros(1), z0[None], H0)
+    return np.concatenate([z0[0], [-H0[0, 0]]])
+
+
+def peer_solve(setup, solver, T, rtol, atol=None):
+    """scipy's solve_ivp on the extended ODE (q, p, p_t), p_t(0) = -H(z0, 0)."""
+    from scipy.integrate import solve_ivp
+
+    m = 2 * setup.scene.ndof
+    return solve_ivp(_extended_rhs(setup.P, m), (0.0, T), _extended_start(setup), method=solver,
+                     rtol=rtol, atol=rtol if atol is None else atol)
+
+
+def reference(setup, T):
+    """(z_ref at T, label, uncertainty): the exact flow, else scipy DOP853 at 1e-13 checked
+    against cosymp's rk8 at a step of 1% of the scene's time scale."""
+    scene = setup.scene
+    if scene.has_flow:
+        exact = simulate(Setup.make(scene, "exact", setup.values), T, T)
+        return exact.z[-1, 0], "exact flow", 0.0
+    sol = peer_solve(setup, "DOP853", T, 1e-13)
+    if sol.status != 0:
+        raise RunError(f"reference DOP853 failed: {sol.message}", T, 0)
+    z_ref = sol.y[:-1, -1]
+    steps = max(1, math.ceil(T / (0.01 * scene.time_scale)))
+    rk8 = simulate(Setup.make(scene, "rk8", setup.values), T / steps, T, stride=steps)
+    return z_ref, "scipy DOP853 rtol 1e-13", _relative(rk8.z[-1, 0], z_ref)[0]
+
+
+@dataclasses.dataclass
+class Scan:
+    """Figures of one run over every step: final state and time, max |H + p_t|, sampled det."""
+
+    z: np.ndarray
+    pt: float
+    t: float
+    H_ext_max_abs: float
+    det_max_dev: float
+
+
+def scan(setup, h, steps, z0=None, pt0=None, t0=0.0, with_det=True, maps=DIAG_MAPS):
+    """Run steps of h from t0 in chunks, recording every step; max |H + p_t| over every step
+    and max |det M_k - 1| over every step or over `maps` evenly spaced ones (RunError on failure)."""
+    every = max(1, math.ceil(steps / maps))
+    chunk = every * max(1, CHUNK // every)
+    done = 0
+    H_max = 0.0
+    det_max = 0.0 if with_det else math.nan
+    t = t0
+    while done < steps:
+        n = min(chunk, steps - done)
+        tr = simulate(setup, h, n * h, z0=z0, stride=1, t0=t, pt0=pt0)
+        H_max = max(H_max, float(np.max(np.abs(tr.H_ext[:, 0]))))
+        if with_det:
+            sample = dataclasses.replace(tr, t=tr.t[:-1:every], z=tr.z[:-1:every], pt=tr.pt[:-1:every])
+            det_max = max(det_max, float(np.max(det_deviation(tangent_maps(sample, last=True)))))
+        z0, pt0 = tr.z[-1], tr.pt[-1]
+        t = t0 + (done + n) * h
+        done += n
+    return Scan(z0[0], float(pt0[0]), t, H_max, det_max)
+
+
+def _base_row(scene, name, kind, order, preserves, T, ref, unc):
+    row = dict.fromkeys(ROW_FIELDS, math.nan)
+    row.update(scene=scene.name, solver=name, kind=kind, order=order, preserves=preserves, T=T,
+               reference=ref, reference_uncertainty=unc, status="ok")
+    return row
+
+
+def method_point(setup, h, T, z_ref, ref, unc, budget):
+    """One row: setup's method with step h to T (T/h whole steps)."""
+    steps = check_step(h, T)
+    row = _base_row(setup.scene, solver_name(setup), "cosymp", setup.method.order_at(setup.theta),
+                    setup.method.preserves_at(setup.theta), T, ref, unc)
+    row.update(h=h, steps=steps, rhs_evals=rhs_per_step(setup) * steps)
+    try:
+        run, row["wall_s"] = timed(lambda: simulate(setup, h, T, stride=steps), budget)
+        row["error"], row["error_abs"] = _relative(run.z[-1, 0], z_ref)
+        s = scan(setup, h, steps, with_det=setup.method.name != "exact")
+        row["H_ext_max_abs"], row["det_max_dev"] = s.H_ext_max_abs, s.det_max_dev
+    except RunError as e:
+        row.update(wall_s=math.nan, error=math.nan, error_abs=math.nan, status=str(e))
+    return row
+
+
+def peer_point(setup, solver, rtol, T, z_ref, ref, unc, budget):
+    """One row: scipy's solve_ivp with `solver` at rtol = atol to T."""
+    row = _base_row(setup.scene, f"scipy-{solver}", "scipy", {"RK45": 5, "DOP853": 8}.get(solver, math.nan),
+                    "none", T, ref, unc)
+    row["rtol"] = rtol
+    sol, wall = timed(lambda: peer_solve(setup, solver, T, rtol), budget)
+    row.update(steps=len(sol.t) - 1, rhs_evals=sol.nfev)
+    if sol.status != 0 or not np.all(np.isfinite(sol.y[:, -1])):
+        row["status"] = f"solve_ivp failed: {sol.message}"
+        return row
+    m = 2 * setup.scene.ndof
+    row["wall_s"] = wall
+    row["error"], row["error_abs"] = _relative(sol.y[:m, -1], z_ref)
+    H = np.empty((len(sol.t), 1))
+    energies(setup.P, np.ascontiguousarray(sol.t), np.ascontiguousarray(sol.y[:m].T[:, None, :]), H)
+    row["H_ext_max_abs"] = float(np.max(np.abs(H[:, 0] + sol.y[m])))
+    return row
+
+
+def step_counts(first, last):
+    """Whole step counts from first to last, growing by about STEP_GROWTH each."""
+    counts = [first]
+    while counts[-1] * STEP_GROWTH <= last:
+        counts.append(max(counts[-1] + 1, round(counts[-1] * STEP_GROWTH)))
+    return counts
+
+
+def measure(scene, methods=None, values=None, T=None, hs=None, theta=None, peers=False,
+            rtols=PEER_RTOLS, max_steps=1 << 20, budget=0.2, progress=None):
+    """Work-precision rows for a scene (see the module's definitions).
+
+    hs: step sizes for every method (rounded so T/h is whole); by default each method starts at
+    the scene's time scale and refines by STEP_GROWTH until its error is below ERROR_FLOOR,
+    stops decreasing for two refinements (round-off), or max_steps is reached.
+    progress(done, total, label) is called before each run; total counts methods and peers.
+    """
+    scene, setups = _setups(scene, methods, values, theta)
+    T = scene.T if T is None else T
+    check_step(T, T)
+    solvers = [solver_name(s) for s in setups] + (list(PEERS) if peers else [])
+    total = len(solvers)
+    report = progress or (lambda done, total, label: None)
+    report(0, total, "reference")
+    z_ref, ref, unc = reference(setups[0], T)
+    rows = []
+    for i, s in enumerate(setups):
+        if hs is not None:
+            counts = sorted({check_step(h, T) for h in hs})
+        else:
+            counts = step_counts(max(1, math.ceil(T / scene.time_scale)), max_steps)
+        worse = 0
+        best = math.inf
+        for N in counts:
+            report(i, total, f"{solvers[i]} h = {T / N:.3g}")
+            row = method_point(s, T / N, T, z_ref, ref, unc, budget)
+            rows.append(row)
+            if hs is None:
+                err = row["error"]
+                worse = worse + 1 if not err < best else 0
+                best = best if math.isnan(err) else min(best, err)
+                if err < ERROR_FLOOR or (worse >= 2 and best < 1e-6):
+                    break
+    for j, solver in enumerate(PEERS if peers else ()):
+        for rtol in rtols:
+            report(len(setups) + j, total, f"scipy {solver} rtol = {rtol:.0e}")
+            rows.append(peer_point(setups[0], solver, rtol, T, z_ref, ref, unc, budget))
+    report(total, total, "done")
+    return rows
+
+
+def drift(scene, methods=DRIFT_METHODS, values=None, h=None, horizons=None, theta=None, progress=None):
+    """Error and |H + p_t| at growing horizons, each method at one step size h (default the
+    scene's), continuing one run through the horizons. The reference: the exact flow, else rk8
+    at h/2 through the same horizons, with rk8 at h for its uncertainty. Default horizons:
+    DRIFT_HORIZONS up to DRIFT_MAX_STEPS steps of h."""
+    scene, setups = _setups(scene, methods, values, theta)
+    h = scene.h if h is None else h
+    check_step(h, h)
+    if horizons is None:
+        horizons = [T for T in DRIFT_HORIZONS if T <= h * DRIFT_MAX_STEPS] or [h * DRIFT_MAX_STEPS]
+    horizons = sorted(float(T) for T in horizons)
+    counts = [check_step(h, T) for T in horizons]
+    total = len(setups) + (0 if scene.has_flow else 1)
+    report = progress or (lambda done, total, label: None)
+    refs, unc, label = _drift_reference(setups[0], h, counts, report, total)
+    rows = []
+    for i, s in enumerate(setups):
+        report(i + total - len(setups), total, f"{solver_name(s)} to T = {horizons[-1]:g}")
+        z, pt, done, H_max = None, None, 0, 0.0
+        failure = ""
+        for T, N, z_ref, u in zip(horizons, counts, refs, unc):
+            row = dict.fromkeys(DRIFT_FIELDS, math.nan)
+            row.update(scene=scene.name, solver=solver_name(s), order=s.method.order_at(s.theta),
+                       preserves=s.method.preserves_at(s.theta), h=h, T=N * h, steps=N, reference=label,
+                       reference_uncertainty=u, status=failure or "ok")
+            if not failure:
+                try:
+                    sc = scan(s, h, N - done, z0=z, pt0=pt, t0=done * h, with_det=False)
+                except RunError as e:
+                    failure = row["status"] = str(e)
+                else:
+                    z, pt, done = sc.z[None], np.array([sc.pt]), N
+                    H_max = max(H_max, sc.H_ext_max_abs)
+                    H = np.empty((1, 1))
+                    energies(s.P, np.array([N * h]), z[None], H)
+                    row["error"], row["error_abs"] = _relative(z[0], z_ref)
+                    row.update(H_ext_abs=abs(H[0, 0] + pt[0]), H_ext_max_abs=H_max)
+            rows.append(row)
+    report(total, total, "done")
+    return rows
+
+
+def _drift_reference(setup, h, counts, report, total):
+    """Reference states at counts[i] * h, their uncertainties and the reference's label."""
+    scene = setup.scene
+    if scene.has_flow:
+        exact = Setup.make(scene, "exact", setup.values)
+        return [simulate(exact, N * h, N * h).z[-1, 0] for N in counts], [0.0] * len(counts), "exact flow"
+    report(0, total, "reference (rk8)")
+    rk8 = Setup.make(scene, "rk8", setup.values)
+    fine = _checkpoints(rk8, h / 2, [2 * N for N in counts])
+    coarse = _checkpoints(rk8, h, counts)
+    return fine, [_relative(c, f)[0] for f, c in zip(fine, coarse)], "rk8 at h/2"
+
+
+def _checkpoints(setup, h, counts):
+    z, pt, done, out = None, None, 0, []
+    for N in counts:
+        run = simulate(setup, h, (N - done) * h, z0=z, pt0=pt, t0=done * h, stride=N - done)
+        z, pt, done = run.z[-1], run.pt[-1], N
+        out.append(z[0])
+    return out
+
+
+def growth_exponent(rows, solver, key="error"):
+    """Slope of log(key) against log(T) for one solver's drift rows; for the error over the
+    points below 0.1 (before it saturates at the orbit's size) and above ten times the
+    reference's uncertainty. NaN with fewer than 3 points."""
+    def usable(r):
+        v = r[key]
+        if key != "error":
+            return v > 0
+        return 0 < v < 0.1 and v > 10 * r["reference_uncertainty"]
+
+    pts = [(r["T"], r[key]) for r in rows if r["solver"] == solver and r[key] == r[key] and usable(r)]
+    if len(pts) < 3:
+        return math.nan
+    T, v = np.log(np.array(pts)).T
+    return float(np.polyfit(T, v, 1)[0])
+
+
+def cost_at(rows, solver, error):
+    """Wall time at which `solver` reaches `error`: log-log interpolation between its cheapest
+    run below it and the run before (by cost); NaN if it never gets there."""
+    pts = sorted((r["wall_s"], r["error"]) for r in rows if r["solver"] == solver
+                 and r["wall_s"] == r["wall_s"] and r["error"] == r["error"])
+    for k, (w, e) in enumerate(pts):
+        if e <= error:
+            if k == 0 or pts[k - 1][1] <= e:
+                return w
+            w0, e0 = pts[k - 1]
+            f = math.log(error / e0) / math.log(e / e0)
+            return math.exp(math.log(w0) + f * math.log(w / w0))
+    return math.nan
+
+
+def targets(rows, errors=(1e-6, 1e-9)):
+    """Cost of every solver at each target error, and the issue's ratios: DOP853 over cosymp's
+    fastest, and cosymp's best structure-preserving method over cosymp's rk4."""
+    solvers = list(dict.fromkeys(r["solver"] for r in rows))
+    kinds = {r["solver"]: (r["kind"], r["preserves"]) for r in rows}
+    out = {"cost": {e: {s: cost_at(rows, s, e) for s in solvers} for e in errors}, "ratios": {}}
+    for e in errors:
+        cost = out["cost"][e]
+        ours = {s: c for s, c in cost.items() if kinds[s][0] == "cosymp" and not math.isnan(c)}
+        sp = {s: c for s, c in ours.items() if kinds[s][1] == "symplectic"}
+        fastest = min(ours, key=ours.get) if ours else None
+        best_sp = min(sp, key=sp.get) if sp else None
+        out["ratios"][e] = {
+            "fastest": fastest,
+            "dop853_over_fastest": cost.get("scipy-DOP853", math.nan) / ours[fastest] if fastest else math.nan,
+            "best_symplectic": best_sp,
+            "symplectic_over_rk4": sp[best_sp] / cost.get("rk4", math.nan) if best_sp else math.nan,
+        }
+    return out
+
+
+def write_rows(rows, path, fields=ROW_FIELDS):
+    """Tidy rows to CSV or JSON (by the file's extension)."""
+    path = str(path)
+    if path.endswith(".json"):
+        with open(path, "w") as f:
+            json.dump([{k: _json_value(r[k]) for k in fields} for r in rows], f, indent=1)
+            f.write("\n")
+    elif path.endswith(".csv"):
+        with open(path, "w", newline="") as f:
+            w = csv.DictWriter(f, fields, extrasaction="ignore")
+            w.writeheader()
+            w.writerows({k: repr(v) if isinstance(v, float) else v for k, v in r.items()} for r in rows)
+    else:
+        raise InputError(f"cannot write '{path}': name a .csv or .json file")
+
+
+def _json_value(v):
+    return None if isinstance(v, float) and not math.isfinite(v) else v
+
+
+def read_rows(path):
+    """Rows written by write_rows (CSV or JSON), numbers as floats and ints again."""
+    path = str(path)
+    if path.endswith(".json"):
+        with open(path) as f:
+            return [{k: math.nan if v is None else v for k, v in r.items()} for r in json.load(f)]
+    with open(path, newline="") as f:
+        return [{k: _parse(v) for k, v in r.items()} for r in csv.DictReader(f)]
+
+
+def _parse(text):
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text

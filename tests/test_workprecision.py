@@ -1,0 +1,179 @@
+"""Work-precision and long-horizon measurements on tiny configurations."""
+import io
+import math
+
+import numpy as np
+import pytest
+
+from cosymp import workprecision as wp
+from cosymp.cli import main
+from cosymp.progress import Bar
+
+HS = [0.4, 0.2, 0.1, 0.05]
+
+
+@pytest.fixture(scope="module")
+def decaying_rows():
+    return wp.measure("decaying", ["euler", "midpoint", "rk4", "gauss6"], T=2.0, hs=HS, budget=0.01)
+
+
+def by_solver(rows, solver):
+    return sorted((r for r in rows if r["solver"] == solver), key=lambda r: -r["h"])
+
+
+def test_errors_order_as_the_orders_predict(decaying_rows):
+    """At every step size: euler > midpoint > rk4 > gauss6, and each fitted slope is the order."""
+    errs = {s: np.array([r["error"] for r in by_solver(decaying_rows, s)]) for s in ("euler", "midpoint", "rk4", "gauss6")}
+    assert np.all(errs["euler"] > errs["midpoint"])
+    assert np.all(errs["midpoint"] > errs["rk4"])
+    assert np.all(errs["rk4"] > errs["gauss6"])
+    for solver, order in (("euler", 1), ("midpoint", 2), ("rk4", 4), ("gauss6", 6)):
+        rows = by_solver(decaying_rows, solver)
+        slope = np.polyfit(np.log([r["h"] for r in rows]), np.log([r["error"] for r in rows]), 1)[0]
+        assert abs(slope - order) < 0.3, (solver, slope)
+
+
+def test_rows_are_complete_and_honest(decaying_rows):
+    for r in decaying_rows:
+        assert set(r) == set(wp.ROW_FIELDS)
+        assert r["status"] == "ok" and r["reference"] == "exact flow"
+        assert r["steps"] * r["h"] == pytest.approx(2.0)
+        assert 0 < r["wall_s"] < 1.0
+        assert r["error_abs"] >= r["error"] * 0 and r["error"] > 0
+    for r in by_solver(decaying_rows, "midpoint") + by_solver(decaying_rows, "gauss6"):
+        assert r["det_max_dev"] < 1e-14
+    euler = by_solver(decaying_rows, "euler")
+    # explicit Euler's one-step det on the opening example is 1 + h^2 e^(-2 t_k): largest at t = 0
+    assert [r["det_max_dev"] for r in euler] == pytest.approx([r["h"] ** 2 for r in euler], rel=1e-12)
+    assert [r["rhs_evals"] for r in by_solver(decaying_rows, "rk4")] == [4 * r["steps"] for r in by_solver(decaying_rows, "rk4")]
+
+
+def test_adaptive_grid_stops_at_round_off():
+    rows = wp.measure("decaying", ["rk8"], T=2.0, budget=0.0)
+    errs = [r["error"] for r in rows]
+    assert min(errs) < 1e-11
+    assert len(rows) < 20
+
+
+def test_peers_in_the_same_table():
+    rows = wp.measure("modulated", ["rk4"], T=5.0, hs=[0.1], peers=True, rtols=(1e-4, 1e-8), budget=0.0)
+    peers = [r for r in rows if r["kind"] == "scipy"]
+    assert [r["solver"] for r in peers] == ["scipy-RK45"] * 2 + ["scipy-DOP853"] * 2 + ["scipy-LSODA"] * 2
+    assert rows[0]["reference"].startswith("scipy DOP853") and rows[0]["reference_uncertainty"] < 1e-11
+    for solver in wp.PEERS:
+        loose, tight = (r for r in peers if r["solver"] == f"scipy-{solver}")
+        assert tight["error"] < loose["error"]
+        assert tight["rhs_evals"] > loose["rhs_evals"] and math.isnan(tight["det_max_dev"])
+        assert tight["H_ext_max_abs"] < loose["H_ext_max_abs"]
+
+
+def test_a_failed_run_is_a_nan_row_not_dropped():
+    """Implicit midpoint on the driven pendulum at h = 0.5: Newton fails in step 4."""
+    rows = wp.measure("kapitza", ["midpoint"], T=2.0, hs=[0.5, 0.01], budget=0.0)
+    failed, ok = by_solver(rows, "midpoint")
+    assert math.isnan(failed["error"]) and math.isnan(failed["wall_s"]) and "Newton" in failed["status"]
+    assert ok["status"] == "ok" and ok["error"] < 0.1
+    assert math.isnan(wp.cost_at([failed], "midpoint", 1.0))
+
+
+@pytest.mark.parametrize("suffix", ["csv", "json"])
+def test_rows_round_trip(decaying_rows, tmp_path, suffix):
+    rows = decaying_rows + wp.measure("kapitza", ["midpoint"], T=1.0, hs=[0.5], budget=0.0)
+    path = tmp_path / f"wp.{suffix}"
+    wp.write_rows(rows, path)
+    back = wp.read_rows(path)
+    assert len(back) == len(rows)
+    for a, b in zip(rows, back):
+        assert list(b) == list(wp.ROW_FIELDS)
+        for k in wp.ROW_FIELDS:
+            if isinstance(a[k], float) and math.isnan(a[k]):
+                assert math.isnan(b[k]), k
+            else:
+                assert b[k] == a[k], k
+
+
+def test_cost_at_interpolates_in_log_log():
+    rows = [{"solver": "x", "wall_s": w, "error": e} for w, e in ((1.0, 1e-4), (10.0, 1e-8), (100.0, 1e-12))]
+    assert wp.cost_at(rows, "x", 1e-6) == pytest.approx(math.sqrt(10.0))
+    assert wp.cost_at(rows, "x", 1e-4) == 1.0
+    assert math.isnan(wp.cost_at(rows, "x", 1e-13))
+
+
+def test_progress_and_cancel():
+    seen = []
+    wp.measure("decaying", ["rk4", "midpoint"], T=1.0, hs=[0.1], budget=0.0, progress=lambda *a: seen.append(a))
+    assert seen[0][:2] == (0, 2) and seen[-1] == (2, 2, "done")
+
+    def stop(done, total, label):
+        if done == 1:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        wp.measure("decaying", ["rk4", "midpoint"], T=1.0, hs=[0.1], budget=0.0, progress=stop)
+
+
+def test_drift_symplectic_bounded_rk4_growing():
+    """The pendulum (kapitza without drive): |H + p_t| of RK4 grows linearly with T, that of
+    the symplectic methods stays bounded; the errors of the symplectic methods grow linearly."""
+    horizons = [20.0, 50.0, 100.0, 200.0, 500.0, 1000.0]
+    rows = wp.drift("kapitza", ["rk4", "midpoint", "gauss4"], {"a": 0.0}, h=0.05, horizons=horizons)
+    assert len(rows) == 3 * len(horizons) and all(r["status"] == "ok" for r in rows)
+    assert wp.growth_exponent(rows, "rk4", "H_ext_max_abs") == pytest.approx(1.0, abs=0.1)
+    for solver in ("midpoint", "gauss4"):
+        H = [r["H_ext_max_abs"] for r in rows if r["solver"] == solver]
+        assert H[-1] < 1.5 * H[0]
+        assert wp.growth_exponent(rows, solver) == pytest.approx(1.0, abs=0.15)
+    assert rows[0]["reference"] == "rk8 at h/2" and max(r["reference_uncertainty"] for r in rows) < 1e-9
+
+
+def test_drift_failure_is_kept():
+    rows = wp.drift("kapitza", ["midpoint"], h=0.5, horizons=[1.0, 10.0])
+    assert all(math.isnan(r["error"]) and "Newton" in r["status"] for r in rows[1:])
+
+
+def test_cli_workprecision(tmp_path):
+    out, err = io.StringIO(), io.StringIO()
+    path = tmp_path / "wp.csv"
+    code = main(["workprecision", "decaying", "--methods", "rk4", "midpoint", "--T", "2", "--h", "0.2", "0.1",
+                 "--budget", "0.01", "--out", str(path)], out, err)
+    assert code == 0, err.getvalue()
+    text = out.getvalue()
+    assert "rk4" in text and "s to 1e-6" in text and "4 runs written" in text
+    assert len(wp.read_rows(path)) == 4
+
+
+def test_cli_long(tmp_path):
+    out, err = io.StringIO(), io.StringIO()
+    code = main(["workprecision", "damped", "--long", "--methods", "midpoint", "--h", "0.1", "--set", "gamma=2e-4",
+                 "--horizons", "10", "100", "1000", "--out", str(tmp_path / "d.json")], out, err)
+    assert code == 0, err.getvalue()
+    assert "err T=1000" in out.getvalue() and "H~ slope" in out.getvalue()
+    assert len(wp.read_rows(tmp_path / "d.json")) == 3
+
+
+@pytest.mark.parametrize("argv,says", [
+    (["decaying", "--out", "x.txt"], "name a .csv or .json"),
+    (["decaying", "--max-steps", "0"], "--max-steps"),
+    (["decaying", "--budget", "-1"], "--budget"),
+    (["nowhere"], "unknown scene"),
+    (["decaying", "--methods", "nothing"], "unknown method"),
+    (["decaying", "--h", "0"], "h = 0.0 must be positive"),
+    (["decaying", "--long", "--h", "0.1", "0.2"], "one --h"),
+    (["decaying", "--long", "--horizons", "1e12"], "exceeds the cap"),
+    (["decaying", "--methods", "boris"], "pushes a charge"),
+])
+def test_cli_bad_input_one_line(argv, says):
+    out, err = io.StringIO(), io.StringIO()
+    assert main(["workprecision", *argv], out, err) == 2
+    assert says in err.getvalue() and err.getvalue().count("\n") == 1
+
+
+def test_progress_bar_draws_on_a_terminal():
+    stream = io.StringIO()
+    bar = Bar(stream, width=10, force=True)
+    bar(3, 10, "rk4 h = 0.1")
+    bar.close()
+    assert "[###.......] 3/10 rk4 h = 0.1" in stream.getvalue() and stream.getvalue().endswith("\n")
+    quiet = io.StringIO()
+    Bar(quiet)(1, 2)
+    assert quiet.getvalue() == ""
