@@ -3,7 +3,9 @@
 The C reference (bench_ref.c) mirrors cosymp/kernels and the scenes formula for formula; it is
 compiled here with gcc once per scene, so the ratio numba/C measures the compiled code, not the
 algorithm. Both run the same scene, method, h, initial state and number of steps, recording
-every step, interleaved, and their final states must agree.
+every step, interleaved, and their final states must agree. On linear scenes both sides step
+by the step's matrix (cosymp's ensemble path); `simulate` runs a single trajectory by member
+steps instead, which cost less (kernels.loops.propagate).
 """
 import ctypes
 import json
@@ -32,7 +34,7 @@ from .kernels.families import (
     Gauss,
     Theta,
 )
-from .kernels.loops import energies, propagate
+from .kernels.loops import energies, propagate_matrix, propagate_members
 from .methods import METHODS
 from .methods import method as get_method
 from .scenes import SCENES
@@ -130,7 +132,8 @@ class _Numba(_Runner):
     def __init__(self, setup, h, z0, pt0, nsteps):
         super().__init__(z0, pt0, nsteps)
         self.setup, self.h = setup, h
-        self.kernel = propagate(setup)
+        # bench_ref.c's algorithm: the step matrix on linear scenes, whatever the ensemble size
+        self.kernel = propagate_matrix if setup.scene.kernel.linear else propagate_members
 
     def _run(self):
         return self.kernel(self.setup.data, self.setup.P, 0.0, self.h, self.Z, self.PT, self.nsteps, 1,

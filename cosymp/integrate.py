@@ -47,6 +47,7 @@ class Setup:
     values: dict
     P: tuple
     data: tuple
+    start: np.ndarray
 
     @classmethod
     def make(cls, scene, method, values=None, theta=None):
@@ -58,7 +59,10 @@ class Setup:
         data = method.data(theta)
         vals = scene.values(values)
         theta = (0.5 if theta is None else float(theta)) if method.takes_theta else None
-        return cls(scene, method, theta, vals, scene.pack(vals), data)
+        q0, p0 = scene.initial(vals)
+        start = np.concatenate([q0, p0])[None, :]
+        start.flags.writeable = False
+        return cls(scene, method, theta, vals, scene.pack(vals), data, start)
 
     def with_values(self, **changes):
         return Setup.make(self.scene, self.method, {**self.values, **changes}, self.theta)
@@ -113,10 +117,9 @@ class Trajectory:
 
 
 def initial_states(setup, z0=None):
-    """(N, 2n) initial states: z0 rows if given, else the scene's initial condition."""
+    """(N, 2n) initial states (a new array): z0 rows if given, else the scene's initial condition."""
     if z0 is None:
-        q0, p0 = setup.scene.initial(setup.values)
-        return np.concatenate([q0, p0])[None, :]
+        return setup.start.copy()
     z0 = np.array(z0, dtype=float, ndmin=2)
     if z0.shape[1] != 2 * setup.scene.ndof or not np.all(np.isfinite(z0)):
         raise InputError(f"initial states must be finite rows of length {2 * setup.scene.ndof}")
@@ -151,7 +154,7 @@ def simulate(setup, h, T, z0=None, stride=None, increments=False, t0=0.0, pt0=No
     PTrec = np.empty((K, N))
     dZrec = np.empty((K if increments else 0, N, m))
     start = time.perf_counter()
-    status, done = propagate(setup)(setup.data, setup.P, float(t0), float(h), Z, PT, steps, stride,
+    status, done = propagate(setup, N)(setup.data, setup.P, float(t0), float(h), Z, PT, steps, stride,
                                     Trec, Zrec, PTrec, dZrec)
     wall = time.perf_counter() - start
     kept = done // stride + 1

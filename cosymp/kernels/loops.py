@@ -172,9 +172,12 @@ def tangent_complex(D, P, h, T, Z, PT, M):
     return OK, Z.shape[0]
 
 
-def propagate(setup):
-    """The compiled loop for a setup's scene: one matrix per step if linear, else members."""
-    return propagate_matrix if setup.scene.kernel.linear else propagate_members
+def propagate(setup, members):
+    """The compiled loop for `members` trajectories of a setup: an ensemble of a linear scene
+    steps by one matrix per step, shared by its members; a single trajectory (or any nonlinear
+    scene) by member steps, which for one trajectory cost 1.1-3.6x less than building the
+    step's matrix (no matrix products; measured on every linear scene and family)."""
+    return propagate_matrix if setup.scene.kernel.linear and members > 1 else propagate_members
 
 
 def tangent(setup):
