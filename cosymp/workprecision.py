@@ -335,16 +335,17 @@ def _checkpoints(setup, h, counts):
 
 
 def growth_exponent(rows, solver, key="error"):
-    """Slope of log(key) against log(T) for one solver's drift rows; for the error over the
-    points below 0.1 (before it saturates at the orbit's size) and above ten times the
-    reference's uncertainty. NaN with fewer than 3 points."""
-    def usable(r):
+    """Slope of log(key) against log(T) for one solver's drift rows, NaN with fewer than 3
+    points. For the error: over the horizons before it first reaches 0.1 (where it saturates at
+    the orbit's size, and a phase error can wrap back below it) and above ten times the
+    reference's uncertainty."""
+    pts = []
+    for r in sorted((r for r in rows if r["solver"] == solver), key=lambda r: r["T"]):
         v = r[key]
-        if key != "error":
-            return v > 0
-        return 0 < v < 0.1 and v > 10 * r["reference_uncertainty"]
-
-    pts = [(r["T"], r[key]) for r in rows if r["solver"] == solver and r[key] == r[key] and usable(r)]
+        if key == "error" and not v < 0.1:
+            break
+        if v > 0 and (key != "error" or v > 10 * r["reference_uncertainty"]):
+            pts.append((r["T"], v))
     if len(pts) < 3:
         return math.nan
     T, v = np.log(np.array(pts)).T

@@ -177,3 +177,12 @@ def test_progress_bar_draws_on_a_terminal():
     quiet = io.StringIO()
     Bar(quiet)(1, 2)
     assert quiet.getvalue() == ""
+
+
+def test_growth_exponent_stops_where_the_error_saturates():
+    """A phase error that wrapped back below 0.1 after saturating must not enter the fit."""
+    rows = [{"solver": "x", "T": T, "error": e, "reference_uncertainty": 0.0, "H_ext_max_abs": 1e-9}
+            for T, e in ((1.0, 1e-4), (10.0, 1e-3), (100.0, 1e-2), (1e3, 0.5), (1e4, 0.01))]
+    assert wp.growth_exponent(rows, "x") == pytest.approx(1.0)
+    assert wp.growth_exponent(rows, "x", "H_ext_max_abs") == pytest.approx(0.0)
+    assert math.isnan(wp.growth_exponent(rows[:2], "x"))
