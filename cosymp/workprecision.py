@@ -65,6 +65,13 @@ def _setups(scene, methods, values, theta):
                    for m in dict.fromkeys(names)]
 
 
+def check_horizon(T):
+    """T as a float, or InputError saying what to change."""
+    if not isinstance(T, (int, float)) or not math.isfinite(T) or T <= 0:
+        raise InputError(f"T = {T} must be a positive finite horizon: pass T > 0")
+    return float(T)
+
+
 def solver_name(setup):
     return setup.method.name + (f"({setup.theta:g})" if setup.theta is not None else "")
 
@@ -237,8 +244,7 @@ def measure(scene, methods=None, values=None, T=None, hs=None, theta=None, peers
     progress(done, total, label) is called before each run; total counts methods and peers.
     """
     scene, setups = _setups(scene, methods, values, theta)
-    T = scene.T if T is None else T
-    check_step(T, T)
+    T = scene.T if T is None else check_horizon(T)
     solvers = [solver_name(s) for s in setups] + (list(PEERS) if peers else [])
     total = len(solvers)
     report = progress or (lambda done, total, label: None)
@@ -280,7 +286,7 @@ def drift(scene, methods=DRIFT_METHODS, values=None, h=None, horizons=None, thet
     check_step(h, h)
     if horizons is None:
         horizons = [T for T in DRIFT_HORIZONS if T <= h * DRIFT_MAX_STEPS] or [h * DRIFT_MAX_STEPS]
-    horizons = sorted(float(T) for T in horizons)
+    horizons = sorted(check_horizon(T) for T in horizons)
     counts = [check_step(h, T) for T in horizons]
     total = len(setups) + (0 if scene.has_flow else 1)
     report = progress or (lambda done, total, label: None)

@@ -158,6 +158,8 @@ def test_cli_long(tmp_path):
     (["nowhere"], "unknown scene"),
     (["decaying", "--methods", "nothing"], "unknown method"),
     (["decaying", "--h", "0"], "h = 0.0 must be positive"),
+    (["decaying", "--T", "-1"], "T = -1.0 must be a positive finite horizon"),
+    (["decaying", "--long", "--horizons", "10", "nan"], "T = nan must be a positive finite horizon"),
     (["decaying", "--long", "--h", "0.1", "0.2"], "one --h"),
     (["decaying", "--long", "--horizons", "1e12"], "exceeds the cap"),
     (["decaying", "--methods", "boris"], "pushes a charge"),
