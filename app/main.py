@@ -14,7 +14,19 @@ import param
 from cosymp.errors import InputError
 
 from .presets import query_items
-from .state import LONG_URL_NAMES, URL_NAMES, VIEWS, GaugeStudy, LongRun, Note, Playback, Study, ThetaLesson
+from .state import (
+    LONG_URL_NAMES,
+    URL_NAMES,
+    VIEWS,
+    GaugeStudy,
+    LongHorizons,
+    LongRun,
+    Note,
+    Playback,
+    Study,
+    ThetaLesson,
+    WorkPrecision,
+)
 from .views import (
     CloudView,
     Controls,
@@ -26,6 +38,7 @@ from .views import (
     SceneInfo,
     StructureView,
     ThetaView,
+    WorkPrecisionView,
 )
 
 ASSETS = Path(__file__).resolve().parent.parent / "assets"
@@ -52,13 +65,16 @@ class App(param.Parameterized):
         self.lesson = ThetaLesson(study=self.study)
         self.playback = Playback()
         self.long = LongRun(study=self.study)
+        self.measure = WorkPrecision(study=self.study)
+        self.horizons = LongHorizons(study=self.study)
         self.study.param.watch(self._on_message, "message")
         s = self.study
         views = {"compare": partial(OrbitsView, study=s), "structure": partial(StructureView, study=s),
                  "cloud": partial(CloudView, study=s), "gauges": partial(GaugeView, gauges=self.gauges),
                  "theta": partial(ThetaView, lesson=self.lesson),
                  "play": partial(PlayView, study=s, playback=self.playback),
-                 "long": partial(LongRunView, long=self.long)}
+                 "long": partial(LongRunView, long=self.long),
+                 "workprecision": partial(WorkPrecisionView, measure=self.measure, long=self.horizons)}
         names = list(VIEWS.values())
         # Each tab is built when first shown (dynamic tabs render only the active one).
         self.tabs = pn.Tabs(*[(label, pn.param.ParamFunction(pn.bind(views[name]), lazy=True))
@@ -70,6 +86,12 @@ class App(param.Parameterized):
             pn.state.location.sync(self.study, URL_NAMES, on_error=self._bad_url)
             pn.state.location.sync(self.long, LONG_URL_NAMES, on_error=self._bad_url)
         pn.state.onload(self._flush)
+        pn.state.on_session_destroyed(self._stop)
+
+    def _stop(self, session_context):
+        """A closed page stops its background measurements (before their next run)."""
+        for background in (self.long, self.measure, self.horizons):
+            background.cancel()
 
     def _on_message(self, event):
         if event.new is not None:

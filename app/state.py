@@ -13,15 +13,17 @@ work. Bad input never reaches the derived data: it becomes a `Note` in `Study.me
 says what to change, and the last good results stay.
 """
 import asyncio
+import dataclasses
 import math
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
 from functools import cache, partial
 
 import numpy as np
 import param
 
+from cosymp import workprecision as wp
 from cosymp.diagnostics import (
     det_deviation,
     nearby_states,
@@ -42,7 +44,7 @@ DENSE_RECORDS = 100_000
 CLOUD_POINTS = {True: 32, False: 64}
 DELTA = 1e-4
 VIEWS = {"Orbits": "compare", "Structure": "structure", "Cloud": "cloud", "Gauges": "gauges",
-         "Theta lesson": "theta", "Play": "play", "Long run": "long"}
+         "Theta lesson": "theta", "Play": "play", "Long run": "long", "Work–precision": "workprecision"}
 URL_NAMES = {"scene": "scene", "method": "method", "other": "vs", "theta": "theta", "h": "h", "T": "T",
              "values": "p", "view": "view"}
 LONG_URL_NAMES = {"T_long": "T_long"}
@@ -53,7 +55,7 @@ LONG_CHUNK_SECONDS = 0.3
 LONG_CHUNK_BYTES = 40_000_000
 
 
-@dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True)
 class Note:
     """A message for the user: level is 'error', 'warning' or 'info'."""
 
@@ -61,7 +63,7 @@ class Note:
     text: str
 
 
-@dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True)
 class Entry:
     """One method's run in a comparison: label, Comparison (None if nothing could be computed),
     and the failure message of a run that stopped early ('' if it reached T)."""
@@ -72,7 +74,7 @@ class Entry:
     failure: str
 
 
-@dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True)
 class Runs:
     """The derived data of a comparison: the scene, step and horizon, and one Entry per method."""
 
@@ -501,7 +503,7 @@ class Playback(param.Parameterized):
         return self.frame / self.FRAMES
 
 
-@dataclass
+@dataclasses.dataclass
 class LongSeries:
     """Per-bin envelopes of one method's long run: t (bin starts), H~ min/max, the paper's volume
     estimator min/max, and the max per bin of |det M - 1| and ||M^T J M - J||."""
@@ -651,3 +653,293 @@ class LongRun(param.Parameterized):
                 self.status = f"done: {done} steps per method in {elapsed:.1f} s"
         finally:
             self.running = False
+
+
+# ---------------------------------------------------------------- work against precision
+
+WP_MAX_STEPS = 1 << 17
+WP_BUDGET = 0.05
+WP_RTOLS = tuple(10.0 ** -k for k in range(3, 13))
+DRIFT_TOPS = (1e3, 1e4, 1e5, 1e6)
+DRIFT_DEFAULT_STEPS = 1_000_000
+POLL_S = 0.1
+
+
+# What a measurement may raise besides cosymp's own errors (InputError is a ValueError, RunError a
+# RuntimeError): each becomes a message and the session goes on.
+FAILURES = (ArithmeticError, AttributeError, LookupError, MemoryError, OSError, RuntimeError, TypeError,
+            ValueError)
+
+
+class Cancelled(Exception):
+    """Raised from a progress callback to stop a measurement at its next run."""
+
+
+class Worker:
+    """One background computation: `fn(*args, progress=...)` in a daemon thread. Its progress
+    callback records (done, total, label), and raises Cancelled once `cancelled` is set, which
+    stops cosymp's measurements before their next run."""
+
+    def __init__(self, fn, *args):
+        self.cancelled = False
+        self.latest = (0, 1, "starting")
+        self.result = None
+        self.error = None
+        self.finished = threading.Event()
+        self.thread = threading.Thread(target=self._main, args=(fn, args), daemon=True, name="cosymp-measure")
+
+    def report(self, done, total, label):
+        if self.cancelled:
+            raise Cancelled
+        self.latest = (done, total, label)
+
+    def _main(self, fn, args):
+        try:
+            self.result = fn(*args, progress=self.report)
+        except Cancelled:
+            pass
+        except FAILURES as err:
+            self.error = err
+        finally:
+            if self.result is None and self.error is None and not self.cancelled:
+                self.error = RuntimeError("the computation stopped without a result (see the server's log)")
+            self.finished.set()
+
+
+def failure_text(err):
+    """A user-facing text for an exception: cosymp's own messages as they are, others with their type."""
+    return str(err) if isinstance(err, (InputError, RunError)) else f"{type(err).__name__}: {err}"
+
+
+class Background(param.Parameterized):
+    """A measurement of the study's scene in a worker thread, started by `start()`, with its
+    progress (fraction and the current run's label) published every POLL_S from the event loop,
+    and `cancel()`, which ends it at once in the UI (the worker stops before its next run, its
+    rows are dropped, the last results stay). Subclasses give `_job()` (the validated inputs, or
+    InputError), `_describe(job)`, `_compute(job, progress)` (run in the worker) and may adjust
+    `_finish(job, result)`; without a server `start()` returns when the work is done."""
+
+    study = param.ClassSelector(class_=Study)
+    progress = param.Number(default=0.0, bounds=(0.0, 1.0), doc="Fraction of the runs done.")
+    label = param.String(default="", doc="The run under way.")
+    running = param.Boolean(default=False)
+    status = param.String(default="", doc="What the measurement is doing or how it ended.")
+    rows = param.List(default=[], doc="The rows of the last completed measurement.")
+    setting = param.String(default="", doc="What the rows were measured on.")
+    KIND = "measurement"
+
+    def __init__(self, **params):
+        super().__init__(**params)
+        self._worker = None
+        self.job = None
+
+    def start(self):
+        """Validate and start (no-op while running); bad input becomes a message."""
+        if self.running:
+            return
+        try:
+            job = self._job()
+        except InputError as err:
+            self.study.say(Note("error", f"{self.KIND}: {err}"))
+            return
+        self._worker = Worker(self._compute, job)
+        self.param.update(running=True, progress=0.0, label="starting", status=f"running: {self._describe(job)}")
+        param.parameterized.async_executor(partial(self._watch, self._worker, job))
+
+    def cancel(self):
+        if self._worker is not None:
+            self._worker.cancelled = True
+
+    async def _watch(self, worker, job):
+        started = time.perf_counter()
+        try:
+            worker.thread.start()
+            while not worker.finished.is_set() and not worker.cancelled:
+                done, total, label = worker.latest
+                self.param.update(progress=min(1.0, done / max(total, 1)), label=label)
+                await asyncio.sleep(POLL_S)
+            elapsed = time.perf_counter() - started
+            if worker.cancelled:
+                self.status = f"cancelled after {elapsed:.1f} s ({self.label})"
+            elif worker.error is not None:
+                text = failure_text(worker.error)
+                self.status = f"failed after {elapsed:.1f} s: {text}"
+                self.study.say(Note("error", f"{self.KIND} failed: {text}"))
+            else:
+                self._finish(job, worker.result)
+                self.param.update(progress=1.0, label="done", status=f"done in {elapsed:.1f} s")
+        except FAILURES as err:
+            self.status = f"failed: {failure_text(err)}"
+            self.study.say(Note("error", f"{self.KIND} failed: {failure_text(err)}"))
+        finally:
+            self.running = False
+
+    def _finish(self, job, result):
+        self.job = job
+        self.param.update(rows=result, setting=self._describe(job))
+
+    def _job(self):
+        raise NotImplementedError
+
+    def _describe(self, job):
+        raise NotImplementedError
+
+    def _compute(self, job, progress):
+        raise NotImplementedError
+
+
+def applicable(scene, names):
+    """The names of the methods that apply to the scene (never the exact flow: it is the reference)."""
+    return [m for m in names if m != "exact" and METHODS[m].refusal(SCENES[scene]) is None]
+
+
+@dataclasses.dataclass(frozen=True)
+class Measured:
+    """What a measurement ran: scene, its parameter values, θ, the methods (name, θ or None per
+    solver name), h (drift) or T (work-precision)."""
+
+    scene: str
+    values: dict
+    theta: float
+    solvers: dict
+    h: float = None
+    T: float = None
+    horizons: tuple = ()
+    peers: bool = False
+
+    def describe(self):
+        values = ", ".join(f"{k} = {v}" for k, v in self.values.items())
+        what = [f"T = {self.T:g}"] if self.T is not None else [f"h = {self.h:g}", f"T up to {self.horizons[-1]:g}"]
+        if any(th is not None for _, th in self.solvers.values()):
+            what.append(f"θ = {self.theta:g}")
+        return f"{self.scene}" + (f" ({values})" if values else "") + ": " + ", ".join(what)
+
+
+def solvers_of(scene, methods, values, theta):
+    """{solver name as cosymp.workprecision names it: (method, θ or None)}, or InputError."""
+    if not methods:
+        raise InputError("no methods chosen: choose at least one method")
+    out = {}
+    for m in methods:
+        s = Setup.make(scene, m, values, theta_for(m, theta))
+        out[wp.solver_name(s)] = (m, s.theta)
+    return out
+
+
+class WorkPrecision(Background):
+    """Error at T against wall time for the chosen methods over step sizes (and scipy's
+    solve_ivp over tolerances), on the study's scene, parameters, θ and T. A cosymp point can be
+    opened in the Orbits view (`open_row`)."""
+
+    methods = param.ListSelector(default=[], objects=list(METHODS), doc="cosymp's methods to measure.")
+    peers = param.Boolean(default=True, label="with scipy's solve_ivp (RK45, DOP853, LSODA)",
+                          doc="Also measure scipy's adaptive solvers over tolerances 1e-3 ... 1e-12.")
+    KIND = "work–precision"
+
+    def __init__(self, **params):
+        super().__init__(**params)
+        self.param.methods.objects = applicable(self.study.scene, METHODS)
+        if "methods" not in params:
+            self.methods = applicable(self.study.scene, wp.DEFAULT_METHODS)
+        self.study.param.watch(self._on_scene, ["scene"])
+
+    def _on_scene(self, event):
+        self.param.methods.objects = applicable(self.study.scene, METHODS)
+        self.methods = applicable(self.study.scene, wp.DEFAULT_METHODS)
+
+    def _job(self):
+        s = self.study
+        wp.check_horizon(s.T)
+        first = math.ceil(s.T / s.scene_obj.time_scale)
+        if first > WP_MAX_STEPS:
+            raise InputError(f"T = {s.T:g} takes at least {first} steps per run at the scene's time scale, beyond "
+                             f"this view's {WP_MAX_STEPS} steps per run: shorten T (the long horizons below go "
+                             "further at one h)")
+        return Measured(s.scene, dict(s.values), float(s.theta), solvers_of(s.scene, self.methods, s.values, s.theta),
+                        T=float(s.T), peers=bool(self.peers))
+
+    def _describe(self, job):
+        peers = ", scipy's RK45, DOP853, LSODA" if job.peers else ""
+        return f"{job.describe()}; {len(job.solvers)} methods{peers}"
+
+    def _compute(self, job, progress):
+        return wp.measure(job.scene, [m for m, _ in job.solvers.values()], job.values, job.T, theta=job.theta,
+                          peers=job.peers, rtols=WP_RTOLS, max_steps=WP_MAX_STEPS, budget=WP_BUDGET,
+                          progress=progress)
+
+    def open_row(self, row):
+        """Open a cosymp run in the Orbits view: the measured scene and parameters, the run's
+        method (and θ), its h and the measured T. A scipy run cannot be opened there: a note says so."""
+        if row["kind"] != "cosymp":
+            self.study.say(Note("info", f"{row['solver']} at rtol = {row['rtol']:.0e} is scipy's solve_ivp, which "
+                                        "the main view does not run: click a point of a cosymp method to open it"))
+            return
+        job = self.job
+        method, theta = job.solvers[row["solver"]]
+        updates = {"scene": job.scene, "values": dict(job.values), "method": method, "h": float(row["h"]),
+                   "T": float(row["T"]), "view": "compare"}
+        if theta is not None:
+            updates["theta"] = theta
+        self.study.param.update(**updates)
+
+
+def default_top(h):
+    """The largest horizon of DRIFT_TOPS with at most DRIFT_DEFAULT_STEPS steps of h (at least the first)."""
+    fits = [T for T in DRIFT_TOPS if T / h <= DRIFT_DEFAULT_STEPS * (1 + 1e-9)]
+    return fits[-1] if fits else DRIFT_TOPS[0]
+
+
+class LongHorizons(Background):
+    """Error and max |H~| at growing horizons (DRIFT_HORIZONS up to `T_max`), each chosen method
+    at one step h, on the study's scene, parameters and θ. If the reference itself fails beyond
+    some horizon (a scene whose state grows past floating point), the horizons below it are shown
+    and a note says so."""
+
+    methods = param.ListSelector(default=[], objects=list(METHODS), doc="cosymp's methods to run.")
+    h = param.Number(default=0.1, label="Step h", doc="The step of every method (default: the scene's).")
+    T_max = param.Selector(default=1e4, objects={f"{T:.0e}": T for T in DRIFT_TOPS}, label="Largest horizon",
+                           doc="The horizons are 1e2, 2e2, 5e2, 1e3, ... up to this one.")
+    KIND = "long horizons"
+
+    def __init__(self, **params):
+        super().__init__(**params)
+        self.param.methods.objects = applicable(self.study.scene, METHODS)
+        self.param.update({k: v for k, v in self._defaults().items() if k not in params})
+        self.study.param.watch(self._on_scene, ["scene"])
+
+    def _defaults(self):
+        scene = self.study.scene_obj
+        return {"methods": applicable(scene.name, wp.DRIFT_METHODS), "h": scene.h, "T_max": default_top(scene.h)}
+
+    def _on_scene(self, event):
+        self.param.methods.objects = applicable(self.study.scene, METHODS)
+        self.param.update(self._defaults())
+
+    def _job(self):
+        s = self.study
+        h = float(self.h)
+        steps = check_step(h, self.T_max)
+        if steps > wp.DRIFT_MAX_STEPS:
+            raise InputError(f"T/h = {steps:.3g} steps per method is beyond this view's limit of "
+                             f"{wp.DRIFT_MAX_STEPS:.0e}: increase h or choose a smaller largest horizon")
+        horizons = tuple(T for T in wp.DRIFT_HORIZONS if h < T <= self.T_max)
+        if not horizons:
+            raise InputError(f"h = {h:g} is not below the horizons: choose h < {self.T_max:g}")
+        return Measured(s.scene, dict(s.values), float(s.theta), solvers_of(s.scene, self.methods, s.values, s.theta),
+                        h=h, horizons=horizons)
+
+    def _describe(self, job):
+        return f"{job.describe()}; {', '.join(job.solvers)}"
+
+    def _compute(self, job, progress):
+        return wp.drift(job.scene, [m for m, _ in job.solvers.values()], job.values, job.h, list(job.horizons),
+                        theta=job.theta, progress=progress)
+
+    def _finish(self, job, rows):
+        short = [r for r in rows if r["status"].startswith(wp.REFERENCE_SHORT)]
+        if short:
+            top = max((r["T"] for r in rows if not r["status"].startswith(wp.REFERENCE_SHORT)), default=0.0)
+            job = dataclasses.replace(job, horizons=tuple(T for T in job.horizons if T <= top * (1 + 1e-9)))
+            self.study.say(Note("warning", f"long horizons shown up to T = {top:g} only: {short[0]['status']}"))
+            rows = [r for r in rows if r not in short]
+        super()._finish(job, rows)

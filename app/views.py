@@ -10,6 +10,7 @@ plots, so switching methods never changes a plot's structure. Long series go thr
 state.DENSE_RECORDS records are rasterized (datashader).
 """
 import html
+import math
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
@@ -20,12 +21,24 @@ import panel as pn
 import param
 from holoviews.operation.downsample import downsample1d
 
+from cosymp import workprecision as wp
 from cosymp.methods import METHODS
 from cosymp.scenes import SCENES
 from cosymp.scenes.charged import GAUGES
 
 from .presets import PRESETS
-from .state import LONG_URL_NAMES, URL_NAMES, GaugeStudy, LongRun, Playback, Study, ThetaLesson
+from .state import (
+    LONG_URL_NAMES,
+    URL_NAMES,
+    WP_MAX_STEPS,
+    GaugeStudy,
+    LongHorizons,
+    LongRun,
+    Playback,
+    Study,
+    ThetaLesson,
+    WorkPrecision,
+)
 
 SLOTS = ("A", "B")
 COLORS = ("#1864ab", "#e8590c")
@@ -747,3 +760,284 @@ class PresetLinks(pn.viewable.Viewer):
         items = "".join(f"<li><a href='{html.escape(p.query(URL_NAMES, LONG_URL_NAMES))}' "
                         f"title='{html.escape(p.doc)}'>{html.escape(p.name)}</a></li>" for p in PRESETS)
         return note(f"<h4>Paper figures</h4><ul class='presets'>{items}</ul>")
+
+
+# ---------------------------------------------------------------- work against precision
+
+SOLVER_COLORS = {  # non-preserving methods warm, structure-preserving cool, scipy's grey to black
+    "euler": "#8c564b", "rk4": "#d62728", "rk8": "#ff7f0e", "theta-naive": "#e377c2", "exact": "#7f7f7f",
+    "theta": "#bcbd22", "midpoint": "#1f77b4", "symplectic-euler": "#17becf", "gauss4": "#2ca02c",
+    "gauss6": "#00441b", "composition4": "#9467bd", "composition6": "#3f007d", "boris": "#0b7285",
+    "scipy-RK45": "#868e96", "scipy-DOP853": "#212529", "scipy-LSODA": "#495057",
+}
+WP_HEIGHT = 340
+WP_KEYS = {"error": "relative error at T", "H_ext_max_abs": "max |H~| over the run"}
+DRIFT_KEYS = {"error": "relative error at T", "H_ext_max_abs": "max |H~| up to T"}
+HOVER = [("solver", "@solver"), ("run", "@run"), ("steps", "@steps"), ("error at T", "@error_text"),
+         ("wall time", "@wall_text"), ("max |H~|", "@H_text"), ("max |det M − 1|", "@det_text")]
+WALL = hv.Dimension("wall_s", label="wall time (s)")
+HORIZON = hv.Dimension("T", label="horizon T")
+
+
+def solver_color(solver):
+    return SOLVER_COLORS.get(solver, SOLVER_COLORS.get(solver.split("(")[0], "#343a40"))
+
+
+def finite(x):
+    return isinstance(x, (int, float)) and math.isfinite(x)
+
+
+def _sci(x, unit=""):
+    return f"{x:.3e}{unit}" if finite(x) else "–"
+
+
+def run_text(row):
+    """The step or the tolerance of a work-precision row."""
+    return f"h = {row['h']:.4g}" if row["kind"] == "cosymp" else f"rtol = {row['rtol']:.0e}"
+
+
+def wp_points(rows, key):
+    """The rows drawn in the work-precision plot of `key` ('error' or 'H_ext_max_abs'): those with
+    a finite wall time and a finite value, in row order (point i of the plot's Scatter is row i)."""
+    return [r for r in rows if finite(r["wall_s"]) and finite(r[key])]
+
+
+def wp_plot(rows, key):
+    """key against wall time: one line per solver (its runs in order of refinement; cosymp's
+    methods solid, scipy's dashed) and one Scatter of every point, with what the hover shows.
+    Zeros are drawn at FLOOR."""
+    pts = wp_points(rows, key)
+    vdim = hv.Dimension(key, label=WP_KEYS[key])
+    lines = []
+    for solver in dict.fromkeys(r["solver"] for r in pts):
+        mine = [r for r in pts if r["solver"] == solver]
+        lines.append(hv.Curve(([r["wall_s"] for r in mine], [max(r[key], FLOOR) for r in mine]), WALL, vdim,
+                              label=solver).opts(color=solver_color(solver),
+                                                 line_dash="dashed" if mine[0]["kind"] == "scipy" else "solid"))
+    table = {
+        "wall_s": [r["wall_s"] for r in pts], key: [max(r[key], FLOOR) for r in pts],
+        "solver": [r["solver"] for r in pts], "run": [run_text(r) for r in pts],
+        "steps": [str(r["steps"]) for r in pts], "error_text": [_sci(r["error"]) for r in pts],
+        "wall_text": [_sci(r["wall_s"], " s") for r in pts], "H_text": [_sci(r["H_ext_max_abs"]) for r in pts],
+        "det_text": [_sci(r["det_max_dev"]) for r in pts], "color": [solver_color(r["solver"]) for r in pts],
+        "marker": ["square" if r["kind"] == "scipy" else "circle" for r in pts],
+    }
+    scatter = hv.Scatter(table, WALL, [vdim, *[k for k in table if k not in ("wall_s", key)]])
+    return hv.Overlay([*lines, scatter])
+
+
+def drift_plot(rows, key):
+    """key against the horizon T, one line with markers per method (its fitted growth exponent in
+    the legend), and the slopes T¹ and T² (dotted) through the first horizon's geometric mean, up
+    to ten times the largest value."""
+    vdim = hv.Dimension(key, label=DRIFT_KEYS[key])
+    items = []
+    pts = [r for r in rows if finite(r[key]) and r[key] > 0]
+    for solver in dict.fromkeys(r["solver"] for r in rows):
+        mine = [r for r in pts if r["solver"] == solver]
+        g = wp.growth_exponent(rows, solver, key)
+        label = f"{solver}: slope {g:.2f}" if finite(g) else f"{solver}: slope –"
+        data = ([r["T"] for r in mine], [r[key] for r in mine])
+        color = solver_color(solver)
+        items += [hv.Curve(data, HORIZON, vdim, label=label).opts(color=color),
+                  hv.Scatter(data, HORIZON, vdim, label=label).opts(color=color)]
+    if pts:
+        T0 = min(r["T"] for r in pts)
+        T1 = max(r["T"] for r in pts)
+        y0 = math.exp(np.mean([math.log(r[key]) for r in pts if r["T"] == T0]))
+        top = 10 * max(r[key] for r in pts)
+        for power, label in ((1, "∝ T (linear)"), (2, "∝ T² (quadratic)")):
+            end = min(T1, T0 * (top / y0) ** (1 / power))
+            items.append(hv.Curve(([T0, end], [y0, y0 * (end / T0) ** power]), HORIZON, vdim, label=label).opts(
+                color="#868e96", line_dash="dotted" if power == 1 else "dotdash", line_width=2))
+    return hv.Overlay(items)
+
+
+def wp_opts(title, xlabel, ylabel):
+    return hv.opts.Overlay(responsive=True, height=WP_HEIGHT, show_grid=True, logx=True, logy=True, title=title,
+                           xlabel=xlabel, ylabel=ylabel, legend_position="right", toolbar="right",
+                           legend_opts={"label_text_font_size": "8pt", "spacing": 0},
+                           default_tools=["pan", "wheel_zoom", "box_zoom", "reset", "save"])
+
+
+def failed_html(rows, setting=run_text):
+    """The runs that failed (not plotted), with their messages (a message repeated by a solver's
+    later rows, as a drift's after its run stopped, once at its first row)."""
+    bad = list({(r["solver"], r["status"]): r for r in reversed(rows) if r["status"] != "ok"}.values())[::-1]
+    if not bad:
+        return ""
+    items = "".join(f"<li><b>{html.escape(r['solver'])}</b> {html.escape(setting(r))}: {html.escape(r['status'])}"
+                    "</li>" for r in bad[:8])
+    more = f"<li>… and {len(bad) - 8} more</li>" if len(bad) > 8 else ""
+    return (f"<p class='caveat'>{len(bad)} run{'s' if len(bad) > 1 else ''} failed (not plotted):</p>"
+            f"<ul class='notes'>{items}{more}</ul>")
+
+
+def _seconds(x):
+    return f"{x:.2e} s" if finite(x) else "–"
+
+
+def _ratio(x):
+    return f"{x:.3g}×" if finite(x) else "–"
+
+
+TARGETS_TEXT = ("<p class='doc'>Time to reach an error: the wall time at which a solver's curve crosses it "
+                "(interpolated log–log between its cheapest run below the error and the run before it); – where "
+                "it does not get there in this measurement. The ratios compare the costs at the same error: "
+                "scipy's DOP853 over cosymp's fastest method (above 1: cosymp is faster), and cosymp's fastest "
+                "symplectic method over its RK4 (below 1: structure preservation costs nothing here).</p>")
+
+
+def reference_html(rows):
+    """The reference the errors are measured against, and its largest uncertainty."""
+    if not rows:
+        return ""
+    unc = max((r["reference_uncertainty"] for r in rows if finite(r["reference_uncertainty"])), default=0.0)
+    return (f"<p class='doc'>Reference: {html.escape(str(rows[0]['reference']))}"
+            + (f" (relative uncertainty up to {unc:.1e}: smaller errors are not resolved)" if unc > 0 else "")
+            + ".</p>")
+
+
+def targets_html(rows):
+    """Time to reach 1e-6 and 1e-9 per solver, and the two ratios (cosymp.workprecision.targets)."""
+    if not rows:
+        return ""
+    t = wp.targets(rows)
+    errors = list(t["cost"])
+    solvers = list(t["cost"][errors[0]])
+    head = "<tr><th>time to reach</th>" + "".join(f"<th>error {e:.0e}</th>" for e in errors) + "</tr>"
+    body = "".join(f"<tr><th><span class='swatch' style='background:{solver_color(s)}'></span>{html.escape(s)}</th>"
+                   + "".join(f"<td>{_seconds(t['cost'][e][s])}</td>" for e in errors) + "</tr>" for s in solvers)
+    ratios = t["ratios"]
+
+    def named(e, ratio, who):
+        name = ratios[e][who]
+        return f"{_ratio(ratios[e][ratio])}" + (f" ({html.escape(name)})" if name else "")
+
+    body += ("<tr><th>scipy DOP853 / fastest cosymp</th>"
+             + "".join(f"<td>{named(e, 'dop853_over_fastest', 'fastest')}</td>" for e in errors) + "</tr>"
+             "<tr><th>best symplectic / rk4</th>"
+             + "".join(f"<td>{named(e, 'symplectic_over_rk4', 'best_symplectic')}</td>" for e in errors) + "</tr>")
+    return f"<table class='numbers'>{head}{body}</table>"
+
+
+GROWTH_TEXT = ("<p class='doc'>Growth exponent: the slope of log(error) against log(T), fitted over the horizons "
+               "before the error first reaches 0.1 (where it saturates at the orbit's size) and where it is above "
+               "ten times the reference's uncertainty, and the slope of log(max |H~|); 1 is linear growth, 2 "
+               "quadratic, 0 bounded; – with fewer than three usable horizons. Grey: the slopes T and T² for "
+               "comparison.</p>")
+
+
+def growth_html(rows):
+    """The fitted growth exponents of the error and of max |H~| per method."""
+    if not rows:
+        return ""
+    solvers = list(dict.fromkeys(r["solver"] for r in rows))
+    head = "<tr><th>method</th><th>order</th><th>preserves</th><th>error ∝ T^</th><th>max |H~| ∝ T^</th></tr>"
+    body = ""
+    for s in solvers:
+        first = next(r for r in rows if r["solver"] == s)
+        body += (f"<tr><th><span class='swatch' style='background:{solver_color(s)}'></span>{html.escape(s)}</th>"
+                 f"<td>{first['order']}</td><td>{html.escape(str(first['preserves']))}</td>"
+                 + "".join(f"<td>{_exponent(wp.growth_exponent(rows, s, key))}</td>" for key in DRIFT_KEYS) + "</tr>")
+    return f"<table class='numbers'>{head}{body}</table>"
+
+
+def _exponent(g):
+    return f"{g:.2f}" if finite(g) else "–"
+
+
+WP_TEXT = ("<p>What each method costs for the accuracy it delivers, on the sidebar's scene, parameters, θ and T: "
+           "each of cosymp's methods over step sizes (refined by √2 until the error stops improving or a run "
+           "reaches {steps} steps), and scipy's adaptive <code>solve_ivp</code> over tolerances 1e-3 … 1e-12 on "
+           "the same extended ODE. Wall time: the best of repeated runs after an untimed warm-up (so no "
+           "compilation). Top, the relative error at T against the exact flow, or else a DOP853 run tighter than "
+           "any peer's; below, the largest |H~| = |H + p_t| over the run. <b>Click a point</b> of one of cosymp's "
+           "methods to open that method and step in the Orbits view.</p>")
+LONG_TEXT = ("<h4>Long horizons</h4><p>Each method at one step h, carried from T = 100 to the largest horizon: the "
+             "error at each horizon and the largest |H~| so far. Where the error grows linearly (slope 1) the "
+             "method errs mostly in phase; quadratic growth (slope 2) is the drift that structure preservation "
+             "is meant to prevent.</p>")
+
+
+def run_controls(bg, start_label):
+    """Start and Cancel buttons, a progress bar, the current run's label and the status line."""
+    start = pn.widgets.Button(name=start_label, button_type="primary", disabled=bg.param.running)
+    start.on_click(lambda event: bg.start())
+    cancel = pn.widgets.Button(name="Cancel", button_type="danger", disabled=pn.bind(lambda r: not r, bg.param.running))
+    cancel.on_click(lambda event: bg.cancel())
+    progress = pn.indicators.Progress(value=pn.bind(lambda p: round(100 * p), bg.param.progress), max=100, width=220,
+                                      bar_color="primary", margin=(22, 10, 10, 10))
+    label = pn.bind(lambda running, text: f"<p class='doc wplabel'>{html.escape(text)}</p>" if running else "",
+                    bg.param.running, bg.param.label)
+    status = pn.bind(lambda st, setting: (f"<p class='doc'><b class='wpstatus'>{html.escape(st)}</b>"
+                                          + (f"<br>Shown: {html.escape(setting)}" if setting else "") + "</p>"),
+                     bg.param.status, bg.param.setting)
+    return (pn.Row(start, cancel, progress, note(label, width=320, sizing_mode=None, margin=(18, 5)),
+                   sizing_mode="stretch_width"),
+            note(status))
+
+
+def rows_plot(rows, figure, key, title, xlabel, ylabel, on_tap=None, hint=""):
+    """The plot of `figure(rows, key)`, or the hint before the first measurement; with on_tap, a
+    tap on a point calls on_tap(its index among the Scatter's points)."""
+    if not rows:
+        return note(f"<p class='doc'>{hint}</p>" if hint else "")
+    overlay = figure(rows, key).opts(wp_opts(title, xlabel, ylabel), hv.opts.Curve(line_width=1.5),
+                                     hv.opts.Scatter(size=7, tools=["hover", "tap"] if on_tap else [],
+                                                     **({"hover_tooltips": HOVER, "color": "color",
+                                                         "marker": "marker", "nonselection_alpha": 1.0}
+                                                        if on_tap else {})))
+    if on_tap is not None:
+        scatter = overlay.get(len(overlay) - 1)
+        stream = hv.streams.Selection1D(source=scatter)
+        stream.add_subscriber(lambda index: index and on_tap(index[0]))
+    return pn.pane.HoloViews(overlay, sizing_mode="stretch_width", min_height=WP_HEIGHT + 10, linked_axes=False)
+
+
+class WorkPrecisionView(pn.viewable.Viewer):
+    """Work against precision (error and max |H~| against wall time per method and scipy peer,
+    the time to reach 1e-6 and 1e-9), and the long-horizon drift of the error and of |H~|."""
+
+    measure = param.ClassSelector(class_=WorkPrecision)
+    long = param.ClassSelector(class_=LongHorizons)
+
+    def __panel__(self):
+        m, lh = self.measure, self.long
+        wide = {"sizing_mode": "stretch_width"}
+        wp_row, wp_status = run_controls(m, "Start work–precision")
+        long_row, long_status = run_controls(lh, "Start long horizons")
+        rows = m.param.rows
+
+        def tapped(key):
+            return lambda i: m.open_row(wp_points(m.rows, key)[i])
+
+        hints = ("Nothing measured yet: press Start.", "")
+        wp_plots = [pn.panel(pn.bind(rows_plot, rows, wp_plot, key, title, "wall time (s)", WP_KEYS[key],
+                                     tapped(key), hint), **wide)
+                    for (key, title), hint in zip((("error", "relative error at T against wall time"),
+                                                   ("H_ext_max_abs", "max |H~| = max |H + p_t| against wall time")),
+                                                  hints)]
+        long_plots = [pn.panel(pn.bind(rows_plot, lh.param.rows, drift_plot, key, title, "horizon T",
+                                       DRIFT_KEYS[key], None, hint), **wide)
+                      for (key, title), hint in zip((("error", "relative error at T, at fixed h"),
+                                                     ("H_ext_max_abs", "max |H~| up to T, at fixed h")), hints)]
+        return pn.Column(
+            note(WP_TEXT.format(steps=f"{WP_MAX_STEPS:,}")),
+            pn.widgets.MultiChoice.from_param(m.param.methods, name="Methods", **wide),
+            pn.widgets.Checkbox.from_param(m.param.peers),
+            wp_row, wp_status,
+            note(pn.bind(failed_html, rows)),
+            *wp_plots,
+            note(pn.bind(lambda r: reference_html(r) + TARGETS_TEXT + targets_html(r) if r else "", rows)),
+            pn.layout.Divider(),
+            note(LONG_TEXT),
+            pn.Row(pn.widgets.MultiChoice.from_param(lh.param.methods, name="Methods", **wide),
+                   pn.widgets.FloatInput.from_param(lh.param.h, format="0.[000000]", width=140),
+                   pn.widgets.Select.from_param(lh.param.T_max, width=140), **wide),
+            long_row, long_status,
+            note(pn.bind(failed_html, lh.param.rows, lambda r: f"T = {r['T']:g}")),
+            *long_plots,
+            note(pn.bind(lambda r: reference_html(r) + GROWTH_TEXT + growth_html(r) if r else "", lh.param.rows)),
+            **wide,
+        )

@@ -12,8 +12,10 @@ import time
 
 def warm():
     """Run every method on every scene it applies to (a few steps, with the tangent maps, the
-    carried loop and the exact flow that compare() uses), the gauge study, and import the
-    plotting modules the pages use. Returns the wall time in seconds."""
+    carried loop and the exact flow that compare() uses; one work-precision point, scipy's
+    solvers and one long-horizon point), the gauge study, and import the plotting modules the
+    pages use. Returns the wall time in seconds."""
+    from cosymp import workprecision as wp
     from cosymp.integrate import Setup
     from cosymp.methods import METHODS
     from cosymp.scenes import SCENES
@@ -21,9 +23,12 @@ def warm():
 
     start = time.perf_counter()
     for scene in SCENES.values():
-        for method in METHODS.values():
-            if method.refusal(scene) is None:
-                compare(Setup.make(scene, method.name), scene.h, 10 * scene.h, cloud_points=8)
+        methods = [m.name for m in METHODS.values() if m.refusal(scene) is None]
+        for name in methods:
+            compare(Setup.make(scene, name), scene.h, 10 * scene.h, cloud_points=8)
+        measured = [m for m in methods if m != "exact"]
+        wp.measure(scene.name, measured, T=4 * scene.h, hs=[scene.h], peers=True, rtols=(1e-3,), budget=0.0)
+        wp.drift(scene.name, measured, h=scene.h, horizons=[2 * scene.h])
     gauge_study("midpoint", {}, SCENES["charged"].h, 10 * SCENES["charged"].h)
     for module in ("holoviews.plotting.bokeh", "holoviews.operation.downsample", "tsdownsample"):
         importlib.import_module(module)

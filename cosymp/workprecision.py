@@ -25,6 +25,7 @@ import dataclasses
 import json
 import math
 import time
+from functools import partial
 
 import numpy as np
 
@@ -48,6 +49,7 @@ DEFAULT_METHODS = ("euler", "rk4", "rk8", "midpoint", "symplectic-euler", "gauss
 DRIFT_METHODS = ("rk4", "midpoint", "symplectic-euler", "gauss4", "gauss6")
 DRIFT_HORIZONS = tuple(float(m * 10 ** e) for e in range(2, 6) for m in (1, 2, 5)) + (1e6,)
 DRIFT_MAX_STEPS = 10_000_000
+REFERENCE_SHORT = "reference not finite"
 REFERENCE_RTOL = 3e-14
 MAX_REPEATS = 7
 DIAG_MAPS = 1 << 16
@@ -162,9 +164,10 @@ class Scan:
     det_max_dev: float
 
 
-def scan(setup, h, steps, z0=None, pt0=None, t0=0.0, with_det=True, maps=DIAG_MAPS):
+def scan(setup, h, steps, z0=None, pt0=None, t0=0.0, with_det=True, maps=DIAG_MAPS, tick=None):
     """Run steps of h from t0 in chunks, recording every step; max |H + p_t| over every step
-    and max |det M_k - 1| over every step or over `maps` evenly spaced ones (RunError on failure)."""
+    and max |det M_k - 1| over every step or over `maps` evenly spaced ones (RunError on failure).
+    tick() is called after each chunk."""
     every = max(1, math.ceil(steps / maps))
     chunk = every * max(1, CHUNK // every)
     done = 0
@@ -181,6 +184,8 @@ def scan(setup, h, steps, z0=None, pt0=None, t0=0.0, with_det=True, maps=DIAG_MA
         z0, pt0 = tr.z[-1], tr.pt[-1]
         t = t0 + (done + n) * h
         done += n
+        if tick:
+            tick()
     return Scan(z0[0], float(pt0[0]), t, H_max, det_max)
 
 
@@ -280,7 +285,9 @@ def drift(scene, methods=DRIFT_METHODS, values=None, h=None, horizons=None, thet
     """Error and |H + p_t| at growing horizons, each method at one step size h (default the
     scene's), continuing one run through the horizons. The reference: the exact flow, else rk8
     at h/2 through the same horizons, with rk8 at h for its uncertainty. Default horizons:
-    DRIFT_HORIZONS up to DRIFT_MAX_STEPS steps of h."""
+    DRIFT_HORIZONS up to DRIFT_MAX_STEPS steps of h. Horizons the reference cannot reach (it
+    overflows) are NaN rows whose status says so; progress is reported at least every CHUNK
+    steps, so raising from it stops the run within a fraction of a second."""
     scene, setups = _setups(scene, methods, values, theta)
     h = scene.h if h is None else h
     check_step(h, h)
@@ -290,20 +297,24 @@ def drift(scene, methods=DRIFT_METHODS, values=None, h=None, horizons=None, thet
     counts = [check_step(h, T) for T in horizons]
     total = len(setups) + (0 if scene.has_flow else 1)
     report = progress or (lambda done, total, label: None)
-    refs, unc, label = _drift_reference(setups[0], h, counts, report, total)
+    refs, unc, label, ref_failure = _drift_reference(setups[0], h, counts, report, total)
     rows = []
     for i, s in enumerate(setups):
-        report(i + total - len(setups), total, f"{solver_name(s)} to T = {horizons[-1]:g}")
+        where = f"{solver_name(s)} to T = {horizons[-1]:g}"
+        tick = partial(report, i + total - len(setups), total, where)
+        tick()
         z, pt, done, H_max = None, None, 0, 0.0
         failure = ""
-        for T, N, z_ref, u in zip(horizons, counts, refs, unc):
+        for k, (T, N) in enumerate(zip(horizons, counts)):
             row = dict.fromkeys(DRIFT_FIELDS, math.nan)
             row.update(scene=scene.name, solver=solver_name(s), order=s.method.order_at(s.theta),
                        preserves=s.method.preserves_at(s.theta), h=h, T=N * h, steps=N, reference=label,
-                       reference_uncertainty=u, status=failure or "ok")
-            if not failure:
+                       status=failure or "ok")
+            if k >= len(refs):
+                row["status"] = ref_failure
+            elif not failure:
                 try:
-                    sc = scan(s, h, N - done, z0=z, pt0=pt, t0=done * h, with_det=False)
+                    sc = scan(s, h, N - done, z0=z, pt0=pt, t0=done * h, with_det=False, tick=tick)
                 except RunError as e:
                     failure = row["status"] = str(e)
                 else:
@@ -311,33 +322,53 @@ def drift(scene, methods=DRIFT_METHODS, values=None, h=None, horizons=None, thet
                     H_max = max(H_max, sc.H_ext_max_abs)
                     H = np.empty((1, 1))
                     energies(s.P, np.array([N * h]), z[None], H)
-                    row["error"], row["error_abs"] = _relative(z[0], z_ref)
-                    row.update(H_ext_abs=abs(H[0, 0] + pt[0]), H_ext_max_abs=H_max)
+                    row["error"], row["error_abs"] = _relative(z[0], refs[k])
+                    row.update(H_ext_abs=abs(H[0, 0] + pt[0]), H_ext_max_abs=H_max, reference_uncertainty=unc[k])
             rows.append(row)
     report(total, total, "done")
     return rows
 
 
 def _drift_reference(setup, h, counts, report, total):
-    """Reference states at counts[i] * h, their uncertainties and the reference's label."""
+    """Reference states at counts[i] * h as far as the reference reaches, their uncertainties,
+    the reference's label and why it stopped short ('' if it did not)."""
     scene = setup.scene
+    refs = []
     if scene.has_flow:
         exact = Setup.make(scene, "exact", setup.values)
-        return [simulate(exact, N * h, N * h).z[-1, 0] for N in counts], [0.0] * len(counts), "exact flow"
-    report(0, total, "reference (rk8)")
+        for N in counts:
+            try:
+                refs.append(simulate(exact, N * h, N * h).z[-1, 0])
+            except RunError:
+                return refs, [0.0] * len(refs), "exact flow", _beyond("the exact flow", N * h)
+        return refs, [0.0] * len(refs), "exact flow", ""
+    tick = partial(report, 0, total, "reference (rk8)")
     rk8 = Setup.make(scene, "rk8", setup.values)
-    fine = _checkpoints(rk8, h / 2, [2 * N for N in counts])
-    coarse = _checkpoints(rk8, h, counts)
-    return fine, [_relative(c, f)[0] for f, c in zip(fine, coarse)], "rk8 at h/2"
+    fine, failed = _checkpoints(rk8, h / 2, [2 * N for N in counts], tick)
+    coarse, _ = _checkpoints(rk8, h, counts[:len(fine)], tick)
+    why = _beyond("the rk8 reference", counts[len(fine)] * h) if failed else ""
+    return fine, [_relative(c, f)[0] for f, c in zip(fine, coarse)], "rk8 at h/2", why
 
 
-def _checkpoints(setup, h, counts):
+def _beyond(what, T):
+    return f"{REFERENCE_SHORT} at T = {T:g}: {what} outgrows floating point; choose smaller horizons"
+
+
+def _checkpoints(setup, h, counts, tick):
+    """States at counts[i] steps of h, run in pieces of at most CHUNK steps (tick after each),
+    and whether the run failed before the last count."""
     z, pt, done, out = None, None, 0, []
     for N in counts:
-        run = simulate(setup, h, (N - done) * h, z0=z, pt0=pt, t0=done * h, stride=N - done)
-        z, pt, done = run.z[-1], run.pt[-1], N
+        while done < N:
+            n = min(CHUNK, N - done)
+            try:
+                run = simulate(setup, h, n * h, z0=z, pt0=pt, t0=done * h, stride=n)
+            except RunError:
+                return out, True
+            z, pt, done = run.z[-1], run.pt[-1], done + n
+            tick()
         out.append(z[0])
-    return out
+    return out, False
 
 
 def growth_exponent(rows, solver, key="error"):

@@ -6,6 +6,7 @@ Every page load records every request URL (none may leave 127.0.0.1) and every c
 import json
 import os
 import pathlib
+import re
 import shutil
 import socket
 import subprocess
@@ -257,4 +258,63 @@ def test_theta_lesson_and_shared_link(page):
     link = page.page.url
     page.open(link.split("/app", 1)[1])
     assert page.page.locator(".bk-tab.bk-active").inner_text() == "Theta lesson"
+    page.check()
+
+
+POINT_JS = """([title, solver, k]) => {
+    // Screen position of the k-th point of `solver` in the work-precision plot titled `title`.
+    const roots = Bokeh.index instanceof Map ? [...Bokeh.index.values()] : Object.values(Bokeh.index);
+    const seen = new Set();
+    let found = null;
+    function walk(v) {
+        if (!v || seen.has(v) || found) return;
+        seen.add(v);
+        if (v.frame && v.renderer_views && v.model.title && v.model.title.text === title) {
+            for (const r of v.renderer_views.values()) {
+                const src = r.model.data_source;
+                const data = !src ? {} : src.data instanceof Map ? Object.fromEntries(src.data) : src.data;
+                if (!("run" in data)) continue;
+                const mine = [...data.solver.keys()].filter(i => data.solver[i] === solver);
+                const i = mine[Math.min(k, mine.length - 1)];
+                const box = v.canvas_view.el.getBoundingClientRect();
+                found = {x: box.left + v.frame.x_scale.compute(data.wall_s[i]),
+                         y: box.top + v.frame.y_scale.compute(data[r.model.glyph.y.field][i]),
+                         run: data.run[i], steps: data.steps[i]};
+            }
+        }
+        for (const c of (v.child_views ? [...v.child_views] : [])) walk(c);
+    }
+    for (const r of roots) walk(r);
+    return found;
+}"""
+WP_TITLE = "relative error at T against wall time"
+
+
+def test_work_precision_measures_a_click_opens_the_point_and_long_horizons_cancel(page):
+    page.open(query(scene="decaying", view="workprecision"))
+    started = time.monotonic()
+    page.page.locator("button", has_text="Start work–precision").click()
+    page.page.locator("b.wpstatus").first.filter(has_text="done in").wait_for(timeout=60_000)
+    took = time.monotonic() - started
+    page.page.wait_for_function(f"() => document.body && ({POINT_JS})([{WP_TITLE!r}, 'midpoint', 0]) !== null")
+    page.page.wait_for_timeout(1000)
+    page.shot("10-work-precision")
+    assert took < 30, took
+    expect(page.page.locator("table.numbers").first).to_contain_text("scipy DOP853 / fastest cosymp")
+    point = page.page.evaluate(POINT_JS, [WP_TITLE, "midpoint", 5])
+    page.page.mouse.click(point["x"], point["y"])
+    expect(page.page.locator(".bk-tab.bk-active")).to_have_text("Orbits")
+    assert "method=midpoint" in page.page.url and "view=compare" in page.page.url
+    steps = page.page.locator("table.numbers").first.locator("tr", has_text="steps")
+    expect(steps).to_have_text(re.compile(rf"steps\s*{point['steps']}\s*{point['steps']}"))
+    page.page.wait_for_timeout(1000)
+    page.shot("11-work-precision-point-opened")
+    page.page.locator(".bk-tab", has_text="Work–precision").click()
+    page.page.locator("select:has(option[value='1e+06'])").select_option("1e+06")
+    page.page.locator("button", has_text="Start long horizons").click()
+    page.page.locator(".wplabel", has_text="to T = 1e+06").wait_for()
+    clicked = time.monotonic()
+    page.page.locator("button", has_text="Cancel").nth(1).click()
+    page.page.get_by_text("cancelled after").first.wait_for(timeout=5_000)
+    assert time.monotonic() - clicked < 5
     page.check()

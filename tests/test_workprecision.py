@@ -188,3 +188,25 @@ def test_growth_exponent_stops_where_the_error_saturates():
     assert wp.growth_exponent(rows, "x") == pytest.approx(1.0)
     assert wp.growth_exponent(rows, "x", "H_ext_max_abs") == pytest.approx(0.0)
     assert math.isnan(wp.growth_exponent(rows[:2], "x"))
+
+
+def test_drift_beyond_the_reference_is_a_nan_row():
+    """The damped oscillator at gamma = 0.2: its exact flow overflows before T = 5000."""
+    rows = wp.drift("damped", ["midpoint"], h=0.1, horizons=[100.0, 5000.0])
+    reached, beyond = rows
+    assert reached["status"] == "ok" and reached["error"] < 1.0
+    assert beyond["status"].startswith(wp.REFERENCE_SHORT) and "T = 5000" in beyond["status"]
+    assert math.isnan(beyond["error"])
+
+
+def test_drift_cancel_stops_within_a_chunk():
+    calls = []
+
+    def stop(done, total, label):
+        calls.append(label)
+        if len(calls) > 3:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        wp.drift("modulated", ["midpoint"], h=0.1, horizons=[1e5], progress=stop)
+    assert len(calls) == 4

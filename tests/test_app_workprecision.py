@@ -1,0 +1,207 @@
+"""The app's work-precision and long-horizon state objects and their plots, without a server."""
+import math
+import time
+
+import holoviews as hv
+import numpy as np
+import pytest
+
+from app import views
+from app.state import LongHorizons, Study, WorkPrecision
+from cosymp import workprecision as wp
+
+
+@pytest.fixture(scope="module", autouse=True)
+def plotting_backend():
+    hv.extension("bokeh")
+
+
+@pytest.fixture(scope="module")
+def measured():
+    """A small measurement on the decaying scene (rk4 and the lifted θ-method at θ = 0.3, scipy's
+    solvers), with the progress it published."""
+    s = Study(scene="decaying", theta=0.3)
+    m = WorkPrecision(study=s, methods=["rk4", "theta"])
+    seen = []
+    m.param.watch(lambda e: seen.append((e.new, m.label)), "progress")
+    m.start()
+    return s, m, seen
+
+
+def test_a_measurement_gives_rows_for_every_solver_and_its_progress_reaches_one(measured):
+    _, m, seen = measured
+    assert m.status.startswith("done") and not m.running and m.progress == 1.0
+    fractions = [f for f, _ in seen]
+    assert fractions == sorted(fractions) and fractions[-1] == 1.0 and len(set(fractions)) >= 4
+    assert any(label.startswith("theta(0.3) h =") for _, label in seen)
+    solvers = {r["solver"] for r in m.rows}
+    assert solvers == {"rk4", "theta(0.3)", "scipy-RK45", "scipy-DOP853", "scipy-LSODA"}
+    assert "decaying" in m.setting and "T = 10" in m.setting and "θ = 0.3" in m.setting
+    rk4 = [r for r in m.rows if r["solver"] == "rk4" and r["error"] > 1e-12]
+    slope = np.polyfit(np.log([r["h"] for r in rk4]), np.log([r["error"] for r in rk4]), 1)[0]
+    assert 3.5 < slope < 4.5
+    theta = [r for r in m.rows if r["solver"] == "theta(0.3)"]
+    assert all(r["det_max_dev"] < 1e-12 for r in theta)
+    peers = [r for r in m.rows if r["kind"] == "scipy"]
+    assert all(math.isnan(r["det_max_dev"]) and r["rtol"] > 0 for r in peers)
+
+
+def test_the_plots_draw_every_finite_point_and_the_targets_table_names_the_ratios(measured):
+    _, m, _ = measured
+    overlay = views.wp_plot(m.rows, "error")
+    curves = [el for el in overlay if isinstance(el, hv.Curve)]
+    styles = {el.label: el.opts.get().kwargs["line_dash"] for el in curves}
+    assert styles["rk4"] == "solid" and styles["scipy-DOP853"] == "dashed"
+    scatter = overlay.get(len(overlay) - 1)
+    assert len(scatter) == len(views.wp_points(m.rows, "error")) == sum(len(c) for c in curves)
+    assert set(scatter.dimension_values("marker")) == {"circle", "square"}
+    table = views.targets_html(m.rows)
+    assert "scipy DOP853 / fastest cosymp" in table and "best symplectic / rk4" in table
+    cost = wp.targets(m.rows)["cost"][1e-6]["rk4"]
+    assert f"{cost:.2e} s" in table
+    assert views.reference_html(m.rows) == "<p class='doc'>Reference: exact flow.</p>"
+
+
+def test_failed_runs_are_not_plotted_but_listed():
+    row = dict.fromkeys(wp.ROW_FIELDS, math.nan)
+    good = {**row, "solver": "rk4", "kind": "cosymp", "h": 0.1, "wall_s": 1e-4, "error": 1e-6, "steps": 100,
+            "status": "ok"}
+    bad = {**row, "solver": "gauss4", "kind": "cosymp", "h": 1.0, "steps": 10, "status": "Newton did not converge"}
+    assert views.wp_points([good, bad], "error") == [good]
+    assert "1 run failed" in views.failed_html([good, bad]) and "Newton" in views.failed_html([good, bad])
+
+
+def test_tapping_a_cosymp_point_opens_it_in_the_orbits_view(measured):
+    s, m, _ = measured
+    s.param.update(scene="damped", view="workprecision")
+    pane = views.rows_plot(m.rows, views.wp_plot, "error", "", "", "",
+                           lambda i: m.open_row(views.wp_points(m.rows, "error")[i]))
+    scatter = pane.object.get(len(pane.object) - 1)
+    (stream,) = hv.streams.Stream.registry[scatter]
+    points = views.wp_points(m.rows, "error")
+    k = next(i for i, r in enumerate(points) if r["solver"] == "theta(0.3)" and r["steps"] > 20)
+    stream.event(index=[k])
+    row = points[k]
+    assert (s.scene, s.method, s.theta, s.view) == ("decaying", "theta", 0.3, "compare")
+    assert (s.h, s.T) == (row["h"], 10.0)
+    run = s.results.entries[0].comparison.run
+    assert len(run.t) - 1 == row["steps"] and run.t[-1] == pytest.approx(10.0)
+
+
+def test_tapping_a_peer_point_says_it_cannot_be_opened(measured):
+    s, m, _ = measured
+    before = (s.scene, s.method, s.h, s.view)
+    m.open_row(next(r for r in m.rows if r["kind"] == "scipy"))
+    assert (s.scene, s.method, s.h, s.view) == before
+    assert s.message.level == "info" and "solve_ivp" in s.message.text
+
+
+def test_cancel_stops_a_measurement_within_a_second():
+    s = Study()
+    m = WorkPrecision(study=s)
+    asked = []
+
+    def cancel(event):
+        if event.new > 0 and not asked:
+            asked.append(time.perf_counter())
+            m.cancel()
+
+    m.param.watch(cancel, "progress")
+    m.start()
+    assert m.status.startswith("cancelled") and not m.running and m.rows == []
+    assert m._worker.finished.wait(5)
+    assert time.perf_counter() - asked[0] < 1.5
+
+
+@pytest.mark.parametrize("change, needle", [
+    ({"methods": []}, "choose at least one method"),
+    ({"T": 1e6}, "shorten T"),
+])
+def test_bad_input_is_a_message_and_nothing_starts(change, needle):
+    s = Study(scene="decaying")
+    m = WorkPrecision(study=s)
+    if "T" in change:
+        s.T = change["T"]
+    else:
+        m.methods = change["methods"]
+    m.start()
+    assert not m.running and m.rows == [] and m.status == ""
+    assert s.message.level == "error" and needle in s.message.text
+
+
+def test_an_unexpected_failure_is_a_message_and_the_session_goes_on(monkeypatch):
+    s = Study(scene="decaying")
+    m = WorkPrecision(study=s, methods=["rk4"], peers=False)
+
+    def broken(*args, **kwargs):
+        return 1 / 0
+
+    monkeypatch.setattr(wp, "measure", broken)
+    m.start()
+    assert m.status.startswith("failed") and "ZeroDivisionError" in m.status and not m.running
+    assert s.message.level == "error" and "work–precision failed" in s.message.text
+    monkeypatch.undo()
+    m.start()
+    assert m.status.startswith("done") and m.rows
+
+
+def test_the_methods_and_defaults_follow_the_scene():
+    s = Study()
+    m, lh = WorkPrecision(study=s), LongHorizons(study=s)
+    assert "boris" not in m.param.methods.objects and "exact" not in m.param.methods.objects
+    assert (lh.h, lh.T_max) == (0.1, 1e5)
+    s.scene = "charged"
+    assert "boris" in m.param.methods.objects and "boris" in m.methods
+    assert (lh.h, lh.T_max) == (0.001, 1e3)
+
+
+def test_long_horizons_show_linear_error_growth_and_the_fitted_exponents():
+    s = Study(values={"gamma": 0.0002})
+    lh = LongHorizons(study=s, methods=["rk4", "gauss4"], T_max=1e4)
+    lh.start()
+    assert lh.status.startswith("done") and lh.progress == 1.0
+    assert sorted({r["T"] for r in lh.rows}) == [T for T in wp.DRIFT_HORIZONS if T <= 1e4]
+    for solver in ("rk4", "gauss4"):
+        assert 0.8 < wp.growth_exponent(lh.rows, solver) < 1.2
+    table = views.growth_html(lh.rows)
+    assert f"{wp.growth_exponent(lh.rows, 'rk4'):.2f}" in table
+    overlay = views.drift_plot(lh.rows, "error")
+    assert f"rk4: slope {wp.growth_exponent(lh.rows, 'rk4'):.2f}" in [el.label for el in overlay]
+    slopes = {el.label: el for el in overlay if el.label.startswith("∝")}
+    T1, y1 = (slopes["∝ T (linear)"].dimension_values(i) for i in (0, 1))
+    assert y1[1] / y1[0] == pytest.approx(T1[1] / T1[0])
+
+
+def test_long_horizons_past_the_reference_show_the_horizons_before_it():
+    s = Study()
+    lh = LongHorizons(study=s, T_max=1e4)
+    lh.start()
+    top = max(r["T"] for r in lh.rows)
+    assert lh.status.startswith("done") and 100 <= top < 1e4
+    assert s.message.level == "warning" and f"up to T = {top:g} only" in s.message.text
+    assert f"T up to {top:g}" in lh.setting
+
+
+@pytest.mark.parametrize("h, needle", [(0.0, "h > 0"), (1e-4, "beyond this view's limit")])
+def test_long_horizons_refuse_a_bad_step(h, needle):
+    s = Study()
+    lh = LongHorizons(study=s, h=h, T_max=1e4)
+    lh.start()
+    assert not lh.running and lh.rows == [] and needle in s.message.text
+
+
+def test_long_horizons_can_be_cancelled():
+    s = Study(scene="modulated")
+    lh = LongHorizons(study=s, T_max=1e5)
+    asked = []
+
+    def cancel(event):
+        if "to T =" in event.new and not asked:
+            asked.append(time.perf_counter())
+            lh.cancel()
+
+    lh.param.watch(cancel, "label")
+    lh.start()
+    assert lh.status.startswith("cancelled") and lh.rows == [] and not lh.running
+    assert time.perf_counter() - asked[0] < 0.5
+    assert lh._worker.finished.wait(30)
