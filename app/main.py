@@ -4,6 +4,8 @@ Serve it with `panel serve app` (or `panel serve app --setup app/warmup.py`, whi
 compiled kernel before the first page). Everything is served from this server: the Bootstrap
 template, KaTeX and BokehJS come from Panel's and Bokeh's bundled resources.
 """
+import html
+import io
 from functools import partial
 from pathlib import Path
 
@@ -11,7 +13,7 @@ import holoviews as hv
 import panel as pn
 import param
 
-from cosymp.errors import InputError
+from cosymp.errors import InputError, RunError
 
 from .presets import query_items
 from .state import (
@@ -26,6 +28,7 @@ from .state import (
     Study,
     ThetaLesson,
     WorkPrecision,
+    study_report,
 )
 from .views import (
     CloudView,
@@ -115,17 +118,29 @@ class App(param.Parameterized):
         self._notify("error", f"the link's settings {values} could not be applied: check the scene, method "
                               "and parameter names and values")
 
+    def _report(self):
+        """The report file of the current comparison; bad input becomes a message and a file saying so."""
+        try:
+            text = study_report(self.study)
+        except (InputError, RunError) as err:
+            self._notify("error", f"report: {err}")
+            text = f"<!DOCTYPE html><html><body><p>No report: {html.escape(str(err))}</p></body></html>"
+        return io.BytesIO(text.encode("utf-8"))
+
     def template(self):
         share = pn.widgets.Button(name="Copy link to this view", sizing_mode="stretch_width")
         share.js_on_click(code="navigator.clipboard.writeText(window.location.href);"
                                "cb_obj.label = 'Link copied';")
         busy = self.study.param.busy
         spinner = pn.indicators.LoadingSpinner(value=busy, visible=busy, size=24)
+        download = pn.widgets.FileDownload(callback=self._report, filename="cosymp-report.html",
+                                           label="Download report (HTML)", button_type="primary",
+                                           sizing_mode="stretch_width")
         return pn.template.BootstrapTemplate(
             title="cosymp: structure-preserving integrators for time-dependent Hamiltonians",
             logo=str(ASSETS / "logo.svg"), favicon=str(ASSETS / "logo.svg"), header_background="#0b3d91",
             sidebar_width=360,
-            sidebar=[Controls(study=self.study), pn.layout.Divider(), PresetLinks(), share],
+            sidebar=[Controls(study=self.study), pn.layout.Divider(), PresetLinks(), share, download],
             main=[pn.Row(SceneInfo(study=self.study), spinner, sizing_mode="stretch_width"), self.tabs],
         )
 

@@ -27,15 +27,19 @@ from cosymp import workprecision as wp
 from cosymp.diagnostics import (
     det_deviation,
     nearby_states,
-    paper_volume_form,
     symplecticity_defect,
     tangent_maps,
 )
 from cosymp.errors import InputError, RunError
 from cosymp.integrate import Setup, check_step, simulate
 from cosymp.methods import METHODS
+from cosymp.report import render
+from cosymp.report.scene import command as report_command
+from cosymp.report.scene import scene_report
 from cosymp.scenes import SCENES
-from cosymp.study import compare, gauge_study
+from cosymp.study import compare_until_failure as study_until_failure
+from cosymp.study import gauge_study
+from cosymp.summary import long_chunk, max_chunk
 
 from .presets import long_horizon
 
@@ -52,7 +56,6 @@ SWEEP_THETAS = np.linspace(0.0, 1.0, 21)
 SWEEP_STEPS = 200
 LONG_BINS = 20_000
 LONG_CHUNK_SECONDS = 0.3
-LONG_CHUNK_BYTES = 40_000_000
 
 
 @dataclasses.dataclass(frozen=True)
@@ -128,23 +131,25 @@ def theta_for(method, theta):
 
 
 def compare_until_failure(setup, h, T):
-    """compare(), or, for a run that stops early, compare() up to the last completed step with
-    the failure message. Returns (Comparison or None, message). The carried loop has
-    CLOUD_POINTS[linear] points (a linear map carries a polygon to a polygon: fewer suffice)."""
-    cloud_points = CLOUD_POINTS[setup.scene.kernel.linear]
-    try:
-        return compare(setup, h, T, delta=DELTA, cloud_points=cloud_points), ""
-    except RunError as err:
-        message = str(err)
-        steps = err.step
-    for _ in range(3):
-        if steps < 1:
-            return None, message
-        try:
-            return compare(setup, h, steps * h, delta=DELTA, cloud_points=cloud_points), message
-        except RunError as again:
-            steps = min(steps - 1, again.step)
-    return None, message
+    """cosymp.study.compare_until_failure with this app's loop size and separation: the carried
+    loop has CLOUD_POINTS[linear] points (a linear map carries a polygon to a polygon: fewer suffice)."""
+    return study_until_failure(setup, h, T, delta=DELTA, cloud_points=CLOUD_POINTS[setup.scene.kernel.linear])
+
+
+def study_report(study):
+    """The HTML report of the study's comparison (the views' own runs when they match the
+    inputs, else computed afresh), or InputError saying what to change."""
+    setups = study.setups()
+    study.check_horizon()
+    h, T = float(study.h), float(study.T)
+    runs = study.results
+    computed = None
+    if runs is not None and (runs.scene, runs.h, runs.T) == (study.scene, h, T) and all(
+            e.comparison is None or e.comparison.setup.values == s.values for e, s in zip(runs.entries, setups)) \
+            and [e.method for e in runs.entries] == [s.method.name for s in setups]:
+        computed = [(e.comparison, e.failure) for e in runs.entries]
+    report = scene_report(setups, h, T, report_command(setups, h, T, "cosymp-report.html"), computed=computed)
+    return render(report)
 
 
 def run_pair(scene, setups, h, T):
@@ -521,46 +526,6 @@ class LongSeries:
     def arrays(self):
         return {k: np.concatenate(getattr(self, k)) if getattr(self, k) else np.empty(0)
                 for k in ("t", "H_min", "H_max", "vol_min", "vol_max", "det", "symp")}
-
-
-def bin_reduce(values, width, op):
-    """op (np.minimum or np.maximum) over consecutive bins of `width` values."""
-    return op.reduceat(values, np.arange(0, len(values), width))
-
-
-def long_chunk(setup, h, steps, Z, PT, start, width):
-    """Advance the ensemble Z (member 0 the trajectory, 1.. the nearby states) by `steps` steps
-    from step `start`; returns (per-bin reductions or None, Z, PT, failure message)."""
-    failure = ""
-    try:
-        tr = simulate(setup, h, steps * h, z0=Z, stride=1, increments=True, t0=start * h, pt0=PT)
-    except RunError as err:
-        tr, failure = err.partial, str(err)
-    if len(tr.t) < 2:
-        return None, Z, PT, failure
-    try:
-        M = tangent_maps(tr)
-    except RunError as err:
-        return None, Z, PT, failure or str(err)
-    H = tr.H_ext[1:, 0]
-    vol = paper_volume_form(tr)
-    out = {
-        "t": tr.t[1:][::width],
-        "H_min": bin_reduce(H, width, np.minimum),
-        "H_max": bin_reduce(H, width, np.maximum),
-        "vol_min": bin_reduce(vol, width, np.minimum),
-        "vol_max": bin_reduce(vol, width, np.maximum),
-        "det": bin_reduce(det_deviation(M), width, np.maximum),
-        "symp": bin_reduce(symplecticity_defect(M), width, np.maximum),
-    }
-    return out, np.ascontiguousarray(tr.z[-1]), np.ascontiguousarray(tr.pt[-1]), failure
-
-
-def max_chunk(setup):
-    """Steps per chunk that keep one chunk's records and tangent maps under LONG_CHUNK_BYTES."""
-    m = 2 * setup.scene.ndof
-    members = m + 2
-    return max(1, LONG_CHUNK_BYTES // (members * (m + 1) * 3 * 8 + m * m * 8))
 
 
 class LongRun(param.Parameterized):

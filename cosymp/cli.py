@@ -1,4 +1,4 @@
-"""The `cosymp` command line: run, scenes, methods, workprecision, bench.
+"""The `cosymp` command line: run, scenes, methods, workprecision, report, bench.
 
 Exit codes: 0 done, 2 bad input (one line on stderr saying what to change), 3 a run that
 could not go on (overflow, Newton), also one line.
@@ -6,6 +6,7 @@ could not go on (overflow, Newton), also one line.
 import argparse
 import json
 import math
+import os
 import sys
 
 from .errors import CosympError, InputError, RunError
@@ -65,6 +66,19 @@ def parser():
                    "scene's) to T = 1e2 ... 1e6 (at most 1e7 steps)")
     w.add_argument("--horizons", type=_number, nargs="+", help="horizons for --long")
     w.add_argument("--out", help="write every run as tidy data to FILE.csv or FILE.json")
+    rp = sub.add_parser("report", help="a self-contained HTML report of one comparison (SCENE) or of the "
+                        "paper's Sections 4 and 5 (paper)")
+    rp.add_argument("target", metavar="SCENE|paper")
+    rp.add_argument("--method", default="midpoint")
+    rp.add_argument("--vs", default="rk4", help="the method it is compared with (default rk4)")
+    rp.add_argument("--h", type=_number, help="step size (default: the scene's paper value)")
+    rp.add_argument("--T", type=_number, help="horizon (default: the scene's paper value)")
+    rp.add_argument("--theta", type=_number, help="theta in [0, 1] for theta and theta-naive")
+    rp.add_argument("--set", type=_assignment, action="append", default=[], metavar="NAME=VALUE",
+                    help="a scene parameter, e.g. --set gamma=0.5")
+    rp.add_argument("--quick", action="store_true", help="paper: leave out the long runs (5e5 and 2e5)")
+    rp.add_argument("--no-work-precision", action="store_true", help="paper: leave out the work-precision diagram")
+    rp.add_argument("-o", "--out", required=True, metavar="FILE.html")
     sub.add_parser("scenes", help="list the scenes with their parameters and defaults")
     sub.add_parser("methods", help="list the methods")
     b = sub.add_parser("bench", help="ns/step per scene and method against a C -O3 loop")
@@ -144,6 +158,43 @@ def _workprecision(args, out, err):
     out.write(_drift_table(rows) if args.long else _cost_table(rows))
     if args.out:
         out.write(f"{len(rows)} runs written to {args.out}\n")
+
+
+def _report(args, out, err):
+    from .integrate import Setup, check_step, get_scene
+    from .methods import method
+    from .progress import Bar
+    from .report import write
+
+    if not args.out.endswith((".html", ".htm")):
+        raise InputError(f"-o {args.out}: name an .html file")
+    folder = os.path.dirname(os.path.abspath(args.out))
+    if not (os.path.isdir(folder) and os.access(folder, os.W_OK)):
+        raise InputError(f"cannot write {args.out}: {folder} is not a writable folder; choose another file")
+    bar = Bar(err)
+    try:
+        if args.target == "paper":
+            from .report.paper import paper_report
+
+            report = paper_report(bar, long=not args.quick, work_precision=not args.no_work_precision)
+        else:
+            from .report.scene import command, scene_report
+
+            scene = get_scene(args.target)
+            values = dict(args.set)
+            setups = [Setup.make(scene, m, values, args.theta if method(m).takes_theta else None)
+                      for m in (args.method, args.vs)]
+            h = scene.h if args.h is None else args.h
+            T = scene.T if args.T is None else args.T
+            check_step(h, T)
+            report = scene_report(setups, h, T, command(setups, h, T, args.out), progress=bar)
+    finally:
+        bar.close()
+    try:
+        size = write(report, args.out)
+    except OSError as e:
+        raise InputError(f"cannot write {args.out}: {e.strerror}; choose another file") from None
+    out.write(f"report written to {args.out} ({size / 1e6:.2f} MB)\n")
 
 
 def _cost_table(rows):
@@ -230,6 +281,8 @@ def main(argv=None, out=None, err=None):
             _methods(out)
         elif args.command == "workprecision":
             _workprecision(args, out, err)
+        elif args.command == "report":
+            _report(args, out, err)
         else:
             from .bench import bench
 

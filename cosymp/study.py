@@ -20,6 +20,7 @@ from .diagnostics import (
     symplecticity_defect,
     tangent_maps,
 )
+from .errors import RunError
 from .integrate import Setup, check_step, initial_states, simulate
 from .scenes import charged
 from .summary import transport
@@ -95,6 +96,24 @@ def compare(setup, h, T, delta=1e-4, cloud_points=0, cloud_radius=0.05, stride=N
     return Comparison(setup, run, det_deviation(M), symplecticity_defect(M), paper_symplectic_form(run),
                       paper_volume_form(run), separation_omega(run) / delta ** 2, cloud, area, error, Pi,
                       time.perf_counter() - start)
+
+
+def compare_until_failure(setup, h, T, **options):
+    """compare(), or, for a run that stops early, compare() up to the last completed step with
+    the failure message. Returns (Comparison or None, message)."""
+    try:
+        return compare(setup, h, T, **options), ""
+    except RunError as err:
+        message = str(err)
+        steps = err.step
+    for _ in range(3):
+        if steps < 1:
+            return None, message
+        try:
+            return compare(setup, h, steps * h, **options), message
+        except RunError as again:
+            steps = min(steps - 1, again.step)
+    return None, message
 
 
 def gauge_study(method, values, h, T, theta=None):

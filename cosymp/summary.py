@@ -1,16 +1,20 @@
 """Whole-run figures (maxima over every step), computed chunk by chunk in bounded memory."""
 import dataclasses
+import math
 import time
 
 import numpy as np
 
-from .diagnostics import det_deviation, symplecticity_defect, tangent_maps
+from .diagnostics import det_deviation, nearby_states, paper_volume_form, symplecticity_defect, tangent_maps
+from .errors import RunError
 from .integrate import Setup, check_step, simulate
 from .kernels.loops import energies
 from .reference import reference_final
 from .scenes import charged
 
 CHUNK = 1 << 18
+LONG_CHUNK_BYTES = 40_000_000
+ENVELOPES = ("H_min", "H_max", "vol_min", "vol_max", "det", "symp")
 
 
 def transport(traj, target):
@@ -106,11 +110,74 @@ def run_summary(setup, h, T, transport_from=None, with_error=True, progress=None
     return out
 
 
+def bin_reduce(values, width, op):
+    """op (np.minimum or np.maximum) over consecutive bins of `width` values."""
+    return op.reduceat(values, np.arange(0, len(values), width))
+
+
+def long_chunk(setup, h, steps, Z, PT, start, width):
+    """Advance the ensemble Z (member 0 the trajectory, 1.. the nearby states) by `steps` steps
+    from step `start`; returns (per-bin reductions or None, Z, PT, failure message). The
+    reductions over bins of `width` steps: t (bin starts), min and max of H + p_t and of the
+    paper's volume estimator, max of |det M_k - 1| and of ||M_k^T J M_k - J||."""
+    failure = ""
+    try:
+        tr = simulate(setup, h, steps * h, z0=Z, stride=1, increments=True, t0=start * h, pt0=PT)
+    except RunError as err:
+        tr, failure = err.partial, str(err)
+    if len(tr.t) < 2:
+        return None, Z, PT, failure
+    try:
+        M = tangent_maps(tr)
+    except RunError as err:
+        return None, Z, PT, failure or str(err)
+    H = tr.H_ext[1:, 0]
+    vol = paper_volume_form(tr)
+    out = {
+        "t": tr.t[1:][::width],
+        "H_min": bin_reduce(H, width, np.minimum),
+        "H_max": bin_reduce(H, width, np.maximum),
+        "vol_min": bin_reduce(vol, width, np.minimum),
+        "vol_max": bin_reduce(vol, width, np.maximum),
+        "det": bin_reduce(det_deviation(M), width, np.maximum),
+        "symp": bin_reduce(symplecticity_defect(M), width, np.maximum),
+    }
+    return out, np.ascontiguousarray(tr.z[-1]), np.ascontiguousarray(tr.pt[-1]), failure
+
+
+def max_chunk(setup):
+    """Steps per chunk that keep one chunk's records and tangent maps under LONG_CHUNK_BYTES."""
+    m = 2 * setup.scene.ndof
+    members = m + 2
+    return max(1, LONG_CHUNK_BYTES // (members * (m + 1) * 3 * 8 + m * m * 8))
+
+
+def long_envelopes(setup, h, T, bins, delta=1e-4, progress=None):
+    """A long run of setup (with the 2n+1 nearby states of the paper's estimators) reduced to
+    at most `bins` bins (see long_chunk); returns (dict of arrays, failure message)."""
+    steps = check_step(h, T)
+    width = max(1, math.ceil(steps / bins))
+    chunk = width * max(1, max_chunk(setup) // width)
+    n = setup.scene.ndof
+    Z, PT = nearby_states(setup.start[0], delta, 2 * n + 1), None
+    parts = []
+    done = 0
+    failure = ""
+    while done < steps and not failure:
+        k = min(chunk, steps - done)
+        red, Z, PT, failure = long_chunk(setup, h, k, Z, PT, done, width)
+        if red is not None:
+            parts.append(red)
+        done += k
+        if progress:
+            progress(done, steps)
+    keys = ("t",) + ENVELOPES
+    return {k: np.concatenate([p[k] for p in parts]) if parts else np.empty(0) for k in keys}, failure
+
+
 def paper_volume_run(h=0.1, T=5e5, gamma=2e-4, methods=("midpoint", "rk4"), delta=1e-4):
     """The paper's longest run: damped, each method with the 3 extra trajectories of its
     volume form, advanced together; returns the wall time per method."""
-    from .diagnostics import nearby_states
-
     walls = {}
     for name in methods:
         s = Setup.make("damped", name, {"gamma": gamma})

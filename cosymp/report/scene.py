@@ -1,0 +1,114 @@
+"""The report of one comparison: a scene, its parameters, two methods, their views and figures."""
+import shlex
+
+import numpy as np
+
+from ..reference import reference_final
+from ..study import compare_until_failure
+from . import Figure, Report, Section, Series, Table
+
+DELTA = 1e-4
+CLOUD_POINTS = 32
+
+
+def command(setups, h, T, out="report.html"):
+    """The `cosymp report` command line that reproduces a report of these setups."""
+    first, other = setups
+    scene = first.scene
+    args = ["cosymp", "report", scene.name, "--method", first.method.name, "--vs", other.method.name]
+    theta = first.theta if first.theta is not None else other.theta
+    if theta is not None:
+        args += ["--theta", f"{theta:g}"]
+    args += ["--h", f"{h:g}", "--T", f"{T:g}"]
+    defaults = {p.name: p.default for p in scene.params}
+    for k, v in first.values.items():
+        if v != defaults.get(k):
+            args += ["--set", f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}"]
+    return " ".join(shlex.quote(a) for a in args + ["-o", out])
+
+
+def label(setup):
+    return setup.method.name + (f" (θ = {setup.theta:g})" if setup.theta is not None else "")
+
+
+def scene_report(setups, h, T, cmd, progress=None, computed=None):
+    """A Report of the setups (method and the method it is compared with) on their scene.
+    computed: their (Comparison or None, failure message) pairs if already at hand (the app's)."""
+    report = progress or (lambda done, total, what: None)
+    scene = setups[0].scene
+    total = 2 * len(setups)
+    runs = []
+    for i, s in enumerate(setups):
+        report(2 * i, total, f"{label(s)}: run and diagnostics")
+        if computed is None:
+            c, failure = compare_until_failure(s, h, T, delta=DELTA, cloud_points=CLOUD_POINTS)
+        else:
+            c, failure = computed[i]
+        report(2 * i + 1, total, f"{label(s)}: reference")
+        err = None
+        if c is not None and c.error is None and not failure:
+            z_ref, _ = reference_final(s, h, T)
+            err = float(np.linalg.norm(c.run.z[-1, 0] - z_ref[0]))
+        runs.append((s, c, failure, err))
+    report(total, total, "done")
+    params = Table(["parameter", "value", "meaning"],
+                   [[p.name, setups[0].values[p.name], p.doc] for p in scene.params], caption="Parameters")
+    numbers = Table(["method", "max |H + p_t|", "max |det M_k − 1|", "max ||MᵀJM − J||", "final error", "steps",
+                     "integration time (s)", "stopped"],
+                    [_numbers(s, c, failure, err) for s, c, failure, err in runs],
+                    caption="Figures over every step (final error against the exact flow, else a fine rk8 "
+                            "reference; integration time of the run with its nearby trajectories)")
+    ok = [(s, c) for s, c, _, _ in runs if c is not None]
+    sections = [
+        Section("Scene and methods", [scene.summary, "Look for: " + scene.look_for, *scene.notes,
+                                      *[f"{label(s)}: {s.method.doc}." for s in setups]], [params, numbers]),
+        Section("Orbits and the extended Hamiltonian", [
+            ("The phase portrait of each method and H + p_t along the run (0 for the exact flow; a symplectic "
+            "method keeps it bounded, a non-preserving one lets it drift).")], _orbit_figures(scene, ok)),
+        Section("Structure", [
+            ("|det M_k − 1| and ||M_kᵀ J M_k − J|| of the one-step tangent maps M_k (rigorous: round-off for a "
+            "structure-preserving method), and the paper's estimators as printed: ω(X¹, X²) and det[X¹ X² X³] "
+            "of the one-step increments of nearby trajectories (they follow the increments' size, so they are "
+            "not constant even for a symplectic map).")], _structure_figures(ok)),
+    ]
+    return Report(f"cosymp report: {scene.title}, {' vs '.join(label(s) for s in setups)}",
+                  [f"h = {h:g}, T = {T:g}."], sections, cmd)
+
+
+def _numbers(s, c, failure, err):
+    if c is None:
+        return [label(s), np.nan, np.nan, np.nan, np.nan, 0, np.nan, failure]
+    n = c.summary
+    final = n["final error"] if n["final error"] is not None else (np.nan if err is None else err)
+    return [label(s), n["max |H + p_t|"], n["max |det M - 1|"], n["max |M^T J M - J|"], final, n["steps"],
+            c.run.wall_s, failure or "no"]
+
+
+def _orbit_figures(scene, runs):
+    figs = []
+    if scene.name == "charged":
+        figs.append(Figure("Orbit in the plane", "x", "y", [Series(label(s), c.run.q[:, 0, 0], c.run.q[:, 0, 1])
+                                                            for s, c in runs], parametric=True))
+    else:
+        figs.append(Figure("Phase portrait", "q", "p", [Series(label(s), c.run.q[:, 0, 0], c.run.p[:, 0, 0])
+                                                        for s, c in runs], parametric=True))
+    figs.append(Figure("Extended Hamiltonian H + p_t", "t", "H + p_t",
+                       [Series(label(s), c.run.t, c.run.H_ext[:, 0]) for s, c in runs]))
+    if all(c.error is not None for _, c in runs):
+        figs.append(Figure("Error against the exact flow", "t", "|z − z_exact|",
+                           [Series(label(s), c.run.t, c.error) for s, c in runs], logy=True))
+    return figs
+
+
+def _structure_figures(runs):
+    return [
+        Figure("|det M_k − 1| of the one-step maps", "t", "|det M_k − 1|",
+               [Series(label(s), c.run.t[:-1], c.det_dev) for s, c in runs], logy=True,
+               caption="Exact zeros are not drawn on the log axis."),
+        Figure("||M_kᵀ J M_k − J|| of the one-step maps", "t", "symplecticity defect",
+               [Series(label(s), c.run.t[:-1], c.symp_dev) for s, c in runs], logy=True),
+        Figure("The paper's symplectic-form estimator ω(X¹, X²)", "t", "ω(X¹, X²)",
+               [Series(label(s), c.run.t[1:], c.paper_omega) for s, c in runs]),
+        Figure("The paper's volume-form estimator det[X¹ X² X³]", "t", "det",
+               [Series(label(s), c.run.t[1:], c.paper_volume) for s, c in runs]),
+    ]

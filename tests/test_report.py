@@ -1,0 +1,128 @@
+"""Static HTML reports: built by the CLI (and the app's state), opened from disk in headless
+Chromium with every network request blocked and counted."""
+import io
+import json
+import os
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cosymp.cli import main
+from cosymp.report import Figure, Report, Section, Series, envelope, render
+
+ROOT = Path(__file__).resolve().parent.parent
+ARTIFACTS = ROOT / "tests" / "artifacts"
+CHROMIUM = os.environ.get("COSYMP_CHROMIUM", "/usr/bin/chromium")
+ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+        "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+PAPER_MAX_BYTES = 15_000_000
+
+
+def test_envelope_keeps_extremes_and_bounds_the_size():
+    t = np.arange(1_000_001.0)
+    y = np.sin(t / 50.0)
+    y[123_457] = 7.0
+    x, v = envelope(t, y, 4000)
+    assert len(x) <= 4000 and np.all(np.diff(x) > 0)
+    assert v.max() == 7.0 and v.min() == pytest.approx(-1.0, abs=1e-6)
+    assert envelope(t[:10], y[:10])[1].tolist() == y[:10].tolist()
+
+
+def test_text_is_escaped_and_data_cannot_close_the_script():
+    html = render(Report("<b>title</b>", ["a <script>alert(1)</script> b"],
+                         [Section("s", [], [Figure("f", "x", "y", [Series("</script><b>", [0, 1], [1, np.nan])])])]))
+    assert "<b>title</b>" not in html and "&lt;b&gt;title&lt;/b&gt;" in html
+    assert "<script>alert(1)</script>" not in html
+    data = re.search(r'<script id="figures" type="application/json">(.*?)</script>', html, re.S).group(1)
+    spec = json.loads(data.replace("<\\/", "</"))
+    assert spec[0]["series"][0]["label"] == "</script><b>" and spec[0]["series"][0]["y"] == [1, None]
+
+
+def open_offline(path, shot, interact=False):
+    """Open a report from disk with the network blocked; returns (requests other than the file,
+    console errors, plots drawn, and when asked the second plot's hover readout and its x range
+    before and after dragging a zoom box)."""
+    playwright = pytest.importorskip("playwright.sync_api")
+    if not Path(CHROMIUM).exists():
+        pytest.skip(f"no Chromium at {CHROMIUM}")
+    url = Path(path).resolve().as_uri()
+    with playwright.sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+        ctx = browser.new_context(viewport={"width": 1200, "height": 900}, offline=True)
+        requests, errors = [], []
+        ctx.route("**/*", lambda route: route.continue_() if route.request.url == url else route.abort())
+        page = ctx.new_page()
+        page.on("request", lambda r: requests.append(r.url) if r.url != url else None)
+        page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+        page.on("pageerror", lambda e: errors.append(str(e)))
+        page.goto(url, timeout=120_000)
+        page.wait_for_function("document.body.getAttribute('data-plots') !== null", timeout=120_000)
+        drawn = page.locator(".uplot canvas").count()
+        answers = {}
+        if interact:
+            plot = page.locator(".uplot").nth(1)
+            plot.scroll_into_view_if_needed()
+            box = plot.locator(".u-over").bounding_box()
+            before = page.evaluate("[cosympPlots[1].scales.x.min, cosympPlots[1].scales.x.max]")
+            page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+            answers["hover"] = plot.locator(".u-legend .u-value").nth(1).inner_text()
+            page.mouse.move(box["x"] + 0.3 * box["width"], box["y"] + 0.3 * box["height"])
+            page.mouse.down()
+            page.mouse.move(box["x"] + 0.6 * box["width"], box["y"] + 0.7 * box["height"], steps=5)
+            page.mouse.up()
+            answers["zoom"] = (before, page.evaluate("[cosympPlots[1].scales.x.min, cosympPlots[1].scales.x.max]"))
+        ARTIFACTS.mkdir(exist_ok=True)
+        page.screenshot(path=str(ARTIFACTS / shot), full_page=True)
+        browser.close()
+    return requests, errors, drawn, answers
+
+
+def test_scene_report_from_the_command_line(tmp_path):
+    path = tmp_path / "decaying.html"
+    out, err = io.StringIO(), io.StringIO()
+    assert main(["report", "decaying", "--method", "midpoint", "--vs", "euler", "-o", str(path)], out, err) == 0, err.getvalue()
+    text = path.read_text()
+    assert "cosymp report decaying --method midpoint --vs euler --h 0.1 --T 10" in text
+    assert "max |det M_k − 1|" in text and "integration time (s)" in text
+    requests, errors, drawn, answers = open_offline(path, "report-decaying.png", interact=True)
+    assert requests == [] and errors == []
+    assert drawn == 7
+    assert answers["hover"] not in ("", "–")
+    (x0, x1), (y0, y1) = answers["zoom"]
+    assert x0 < y0 < y1 < x1
+
+
+def test_paper_report(tmp_path):
+    path = tmp_path / "paper.html"
+    out, err = io.StringIO(), io.StringIO()
+    assert main(["report", "paper", "-o", str(path)], out, err) == 0, err.getvalue()
+    size = path.stat().st_size
+    assert size < PAPER_MAX_BYTES
+    text = path.read_text()
+    for needle in ("Section 4.1", "Section 4.2", "Section 5", "T = 500000", "T = 200000", "Work against precision",
+                   "Landau", "Lorenz", "Π_x", "scipy-DOP853"):
+        assert needle in text, needle
+    requests, errors, drawn, _ = open_offline(path, "report-paper.png")
+    assert requests == [] and errors == []
+    assert drawn == 28
+
+
+def test_bad_report_input_is_one_line():
+    for argv, says in ((["report", "damped", "-o", "x.txt"], "name an .html file"),
+                       (["report", "damped", "-o", "/nonexistent/dir/x.html"], "not a writable folder"),
+                       (["report", "nowhere", "-o", "x.html"], "unknown scene"),
+                       (["report", "damped", "--vs", "boris", "-o", "x.html"], "pushes a charge"),
+                       (["report", "damped"], "required")):
+        out, err = io.StringIO(), io.StringIO()
+        assert main(argv, out, err) == 2
+        assert says in err.getvalue() and err.getvalue().count("\n") == 1
+
+
+def test_app_report_uses_the_views_runs():
+    from app.state import Study, study_report
+
+    study = Study(scene="decaying", method="symplectic-euler")
+    text = study_report(study)
+    assert "cosymp report decaying --method symplectic-euler --vs rk4" in text and 'id="figures"' in text
