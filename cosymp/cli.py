@@ -132,14 +132,16 @@ def _workprecision(args, out, err):
     from .integrate import MAX_STEPS
     from .progress import Bar
 
-    if args.out and not args.out.endswith((".csv", ".json")):
-        raise InputError(f"--out {args.out}: name a .csv or .json file")
+    if args.out:
+        _writable(args.out, (".csv", ".json"), "--out", "a .csv or .json file")
     if not 1 <= args.max_steps <= MAX_STEPS:
         raise InputError(f"--max-steps {args.max_steps} must be between 1 and {MAX_STEPS:.0e}")
     if not (math.isfinite(args.budget) and args.budget > 0):
         raise InputError(f"--budget {args.budget} must be a positive number of seconds")
     if args.long and args.peers:
         raise InputError("--peers compares costs at one horizon: drop it with --long")
+    if args.long and args.T is not None:
+        raise InputError("--long runs to the --horizons (default 1e2 ... 1e6): drop --T")
     values = dict(args.set)
     bar = Bar(err)
     try:
@@ -160,17 +162,22 @@ def _workprecision(args, out, err):
         out.write(f"{len(rows)} runs written to {args.out}\n")
 
 
+def _writable(path, suffixes, option, what):
+    """InputError before any work if `path` has the wrong suffix or its folder cannot be written."""
+    if not path.endswith(suffixes):
+        raise InputError(f"{option} {path}: name {what}")
+    folder = os.path.dirname(os.path.abspath(path))
+    if not (os.path.isdir(folder) and os.access(folder, os.W_OK)):
+        raise InputError(f"cannot write {path}: {folder} is not a writable folder; choose another file")
+
+
 def _report(args, out, err):
     from .integrate import Setup, check_step, get_scene
     from .methods import method
     from .progress import Bar
     from .report import write
 
-    if not args.out.endswith((".html", ".htm")):
-        raise InputError(f"-o {args.out}: name an .html file")
-    folder = os.path.dirname(os.path.abspath(args.out))
-    if not (os.path.isdir(folder) and os.access(folder, os.W_OK)):
-        raise InputError(f"cannot write {args.out}: {folder} is not a writable folder; choose another file")
+    _writable(args.out, (".html", ".htm"), "-o", "an .html file")
     bar = Bar(err)
     try:
         if args.target == "paper":
@@ -215,9 +222,15 @@ def _cost_table(rows):
                      f"{max((r['H_ext_max_abs'] for r in ok), default=math.nan):9.1e} "
                      f"{max((r['det_max_dev'] for r in ok), default=math.nan):11.1e}")
     for e, r in t["ratios"].items():
-        lines.append(f"at error {e:.0e}: fastest cosymp method {r['fastest']}; scipy DOP853 / fastest = "
-                     f"{r['dop853_over_fastest']:.3g}; best symplectic ({r['best_symplectic']}) / rk4 = "
-                     f"{r['symplectic_over_rk4']:.3g}")
+        if r["fastest"] is None:
+            lines.append(f"at error {e:.0e}: no cosymp method got there (use smaller steps: --max-steps)")
+            continue
+        parts = [f"fastest cosymp method {r['fastest']}"]
+        if math.isfinite(r["dop853_over_fastest"]):
+            parts.append(f"scipy DOP853 / fastest = {r['dop853_over_fastest']:.3g}")
+        if math.isfinite(r["symplectic_over_rk4"]):
+            parts.append(f"best symplectic ({r['best_symplectic']}) / rk4 = {r['symplectic_over_rk4']:.3g}")
+        lines.append(f"at error {e:.0e}: " + "; ".join(parts))
     return "\n".join(lines) + "\n"
 
 
@@ -225,7 +238,7 @@ def _drift_table(rows):
     from .workprecision import growth_exponent
 
     horizons = sorted({r["T"] for r in rows})
-    shown = [T for T in horizons if math.log10(T) % 1 < 1e-9] or horizons
+    shown = [T for T in horizons if abs(math.log10(T) - round(math.log10(T))) < 1e-6] or horizons
     first = rows[0]
     lines = [(f"{first['scene']}: relative error at T and max |H + p_t| up to T, one step size per method; "
               f"reference: {first['reference']}"),

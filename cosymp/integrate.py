@@ -22,7 +22,8 @@ def get_scene(name):
 
 
 def check_step(h, T):
-    """Number of steps for step h up to horizon T, or InputError saying what to change."""
+    """Number of steps for step h up to horizon T (T/h rounded up, within 1e-9 relative, so that
+    h = T/N gives N), or InputError saying what to change."""
     for label, x in (("h", h), ("T", T)):
         if not isinstance(x, (int, float)) or not math.isfinite(x):
             raise InputError(f"{label} = {x} is not a finite number: pass a finite {label}")
@@ -30,7 +31,8 @@ def check_step(h, T):
         raise InputError(f"h = {h} must be positive: pass a step size h > 0")
     if T <= 0:
         raise InputError(f"T = {T} must be positive: pass a horizon T > 0")
-    steps = math.ceil(T / h - 1e-9)
+    ratio = T / h
+    steps = math.ceil(ratio - 1e-9 * max(1.0, ratio))
     if steps > MAX_STEPS:
         raise InputError(f"T/h = {T / h:.3g} steps exceeds the cap of {MAX_STEPS:.0e}: "
                          f"increase h or shorten T")

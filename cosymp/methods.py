@@ -157,7 +157,7 @@ METHODS = {m.name: m for m in (
     Method("gauss4", "Gauss-Legendre 4", "2-stage Gauss-Legendre collocation, order 4, symplectic",
            4, "symplectic", _gauss4),
     Method("gauss6", "Gauss-Legendre 6", "3-stage Gauss-Legendre collocation, order 6, symplectic; three "
-           "evaluations per step where the order-6 composition needs nine", 6, "symplectic", _gauss6),
+           "stages per step where the order-6 composition takes nine midpoint steps", 6, "symplectic", _gauss6),
     Method("composition4", "Midpoint triple jump (order 4)", "symmetric composition of 3 midpoint "
            "steps (Yoshida's triple jump)", 4, "symplectic", lambda: _composition(_TJ4)),
     Method("composition6", "Midpoint composition (order 6)", "the triple jump applied to the order-4 "

@@ -4,7 +4,7 @@ import math
 import numpy as np
 
 from .integrate import Setup, check_step, initial_states, simulate
-from .kernels.loops import vector_field
+from .kernels.loops import energies, vector_field
 
 REFERENCE_FRACTION = 0.02
 
@@ -32,18 +32,21 @@ def reference_final(setup, h, T, z0=None):
     return a.z[-1], spread
 
 
-def scipy_reference(setup, T, z0=None, rtol=1e-13, atol=1e-13, t_eval=None):
-    """scipy's DOP853 on the extended ODE at tight tolerance: an independent check."""
+def scipy_reference(setup, T, z0=None, rtol=1e-13, atol=1e-13, t_eval=None, method="DOP853"):
+    """scipy's solve_ivp (DOP853 at tight tolerance by default) on the extended ODE (q, p, p_t)
+    from p_t(0) = -H(z0, 0): an independent check, and the work-precision peers."""
     from scipy.integrate import solve_ivp
 
     Z = initial_states(setup, z0)
     P = setup.P
     m = Z.shape[1]
+    H0 = np.empty((1, 1))
+    energies(P, np.zeros(1), Z[:1][None], H0)
 
     def f(t, y):
         out = np.empty(m + 1)
-        vector_field(P, t, y[:m].copy(), out)
+        vector_field(P, t, np.ascontiguousarray(y[:m]), out)
         return out
 
-    y0 = np.concatenate([Z[0], [0.0]])
-    return solve_ivp(f, (0.0, T), y0, method="DOP853", rtol=rtol, atol=atol, t_eval=t_eval)
+    y0 = np.concatenate([Z[0], [-H0[0, 0]]])
+    return solve_ivp(f, (0.0, T), y0, method=method, rtol=rtol, atol=atol, t_eval=t_eval)

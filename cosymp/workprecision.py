@@ -31,11 +31,12 @@ import numpy as np
 
 from .diagnostics import det_deviation, tangent_maps
 from .errors import InputError, RunError
-from .integrate import Setup, check_step, get_scene, initial_states, simulate
+from .integrate import MAX_STEPS, Setup, check_step, get_scene, simulate
 from .kernels.families import Composition, Exact, Explicit, Gauss
-from .kernels.loops import energies, vector_field
+from .kernels.loops import energies
 from .methods import METHODS
 from .methods import method as get_method
+from .reference import scipy_reference
 
 ROW_FIELDS = ("scene", "solver", "kind", "order", "preserves", "h", "rtol", "T", "steps", "rhs_evals",
               "wall_s", "error", "error_abs", "H_ext_max_abs", "det_max_dev", "reference",
@@ -51,7 +52,7 @@ DRIFT_HORIZONS = tuple(float(m * 10 ** e) for e in range(2, 6) for m in (1, 2, 5
 DRIFT_MAX_STEPS = 10_000_000
 REFERENCE_SHORT = "reference not finite"
 REFERENCE_RTOL = 3e-14
-MAX_REPEATS = 7
+MAX_REPEATS = 50
 DIAG_MAPS = 1 << 16
 CHUNK = 1 << 18
 ERROR_FLOOR = 1e-13
@@ -63,6 +64,11 @@ def _setups(scene, methods, values, theta):
     names = [m for m in DEFAULT_METHODS if METHODS[m].refusal(scene) is None] if methods is None else list(methods)
     if not names:
         raise InputError("no methods given: pass at least one method name")
+    if "exact" in names:
+        raise InputError("'exact' is the reference these runs are measured against: leave it out of the methods")
+    if theta is not None and not any(get_method(m).takes_theta for m in names):
+        raise InputError(f"theta = {theta} applies to the methods 'theta' and 'theta-naive' only: add one or "
+                         "drop theta")
     return scene, [Setup.make(scene, m, values, theta if get_method(m).takes_theta else None)
                    for m in dict.fromkeys(names)]
 
@@ -108,33 +114,22 @@ def timed(call, budget):
     return result, best
 
 
+def norm(v):
+    """The 2-norm without overflow for entries beyond 1e154 (the state may be huge yet finite)."""
+    scale = float(np.max(np.abs(v)))
+    if scale == 0.0 or not math.isfinite(scale):
+        return scale
+    return scale * float(np.linalg.norm(np.asarray(v) / scale))
+
+
 def _relative(z, z_ref):
-    err = float(np.linalg.norm(z - z_ref))
-    return err / max(float(np.linalg.norm(z_ref)), np.finfo(float).tiny), err
+    err = norm(np.asarray(z) - np.asarray(z_ref))
+    return err / max(norm(z_ref), np.finfo(float).tiny), err
 
 
-def _extended_rhs(P, m):
-    def f(t, y):
-        out = np.empty(m + 1)
-        vector_field(P, t, np.ascontiguousarray(y[:m]), out)
-        return out
-    return f
-
-
-def _extended_start(setup):
-    z0 = initial_states(setup)
-    H0 = np.empty((1, 1))
-    energies(setup.P, np.zeros(1), z0[None], H0)
-    return np.concatenate([z0[0], [-H0[0, 0]]])
-
-
-def peer_solve(setup, solver, T, rtol, atol=None):
-    """scipy's solve_ivp on the extended ODE (q, p, p_t), p_t(0) = -H(z0, 0)."""
-    from scipy.integrate import solve_ivp
-
-    m = 2 * setup.scene.ndof
-    return solve_ivp(_extended_rhs(setup.P, m), (0.0, T), _extended_start(setup), method=solver,
-                     rtol=rtol, atol=rtol if atol is None else atol)
+def peer_solve(setup, solver, T, rtol):
+    """scipy's solve_ivp with `solver` at rtol = atol on the extended ODE."""
+    return scipy_reference(setup, T, rtol=rtol, atol=rtol, method=solver)
 
 
 def reference(setup, T):
@@ -142,13 +137,20 @@ def reference(setup, T):
     than any peer run) checked against cosymp's rk8 at a step of 1% of the scene's time scale."""
     scene = setup.scene
     if scene.has_flow:
-        exact = simulate(Setup.make(scene, "exact", setup.values), T, T)
+        try:
+            exact = simulate(Setup.make(scene, "exact", setup.values), T, T)
+        except RunError:
+            raise RunError(f"{REFERENCE_SHORT} at T = {T:g}: the exact flow outgrows floating point; "
+                           "shorten T", T, 0) from None
         return exact.z[-1, 0], "exact flow", 0.0
+    steps = max(1, math.ceil(T / (0.01 * scene.time_scale)))
+    if steps > MAX_STEPS:
+        raise InputError(f"T = {T:g} is too long for a reference solution ({steps:.3g} steps of rk8 beyond the "
+                         f"cap of {MAX_STEPS:.0e}): shorten T")
     sol = peer_solve(setup, "DOP853", T, REFERENCE_RTOL)
     if sol.status != 0:
         raise RunError(f"reference DOP853 failed: {sol.message}", T, 0)
     z_ref = sol.y[:-1, -1]
-    steps = max(1, math.ceil(T / (0.01 * scene.time_scale)))
     rk8 = simulate(Setup.make(scene, "rk8", setup.values), T / steps, T, stride=steps)
     return z_ref, f"scipy DOP853 rtol {REFERENCE_RTOL:g}", _relative(rk8.z[-1, 0], z_ref)[0]
 
@@ -260,7 +262,11 @@ def measure(scene, methods=None, values=None, T=None, hs=None, theta=None, peers
         if hs is not None:
             counts = sorted({check_step(h, T) for h in hs})
         else:
-            counts = step_counts(max(1, math.ceil(T / scene.time_scale)), max_steps)
+            first = max(1, math.ceil(T / scene.time_scale))
+            if first > max_steps:
+                raise InputError(f"max_steps = {max_steps} is below the first run's {first} steps (T over the "
+                                 "scene's time scale): raise it or shorten T")
+            counts = step_counts(first, max_steps)
         worse = 0
         best = math.inf
         for N in counts:
@@ -293,8 +299,13 @@ def drift(scene, methods=DRIFT_METHODS, values=None, h=None, horizons=None, thet
     check_step(h, h)
     if horizons is None:
         horizons = [T for T in DRIFT_HORIZONS if T <= h * DRIFT_MAX_STEPS] or [h * DRIFT_MAX_STEPS]
-    horizons = sorted(check_horizon(T) for T in horizons)
+    horizons = sorted({check_horizon(T) for T in horizons})
+    if h >= horizons[0]:
+        raise InputError(f"h = {h:g} is not below the shortest horizon {horizons[0]:g}: choose a smaller h")
     counts = [check_step(h, T) for T in horizons]
+    if counts[-1] > DRIFT_MAX_STEPS:
+        raise InputError(f"T = {horizons[-1]:g} takes {counts[-1]:.3g} steps of h = {h:g}, over this study's "
+                         f"{DRIFT_MAX_STEPS:.0e}: increase h or shorten the horizons")
     total = len(setups) + (0 if scene.has_flow else 1)
     report = progress or (lambda done, total, label: None)
     refs, unc, label, ref_failure = _drift_reference(setups[0], h, counts, report, total)
@@ -391,12 +402,13 @@ def growth_exponent(rows, solver, key="error"):
 
 def cost_at(rows, solver, error):
     """Wall time at which `solver` reaches `error`: log-log interpolation between its cheapest
-    run below it and the run before (by cost); NaN if it never gets there."""
+    run below it and the run before (by cost); an upper bound (that run's time) when its
+    cheapest run is already below; NaN if it never gets there."""
     pts = sorted((r["wall_s"], r["error"]) for r in rows if r["solver"] == solver
                  and r["wall_s"] == r["wall_s"] and r["error"] == r["error"])
     for k, (w, e) in enumerate(pts):
         if e <= error:
-            if k == 0 or pts[k - 1][1] <= e:
+            if k == 0:
                 return w
             w0, e0 = pts[k - 1]
             f = math.log(error / e0) / math.log(e / e0)
@@ -430,19 +442,21 @@ def write_rows(rows, path, fields=ROW_FIELDS):
     path = str(path)
     if path.endswith(".json"):
         with open(path, "w") as f:
-            json.dump([{k: _json_value(r[k]) for k in fields} for r in rows], f, indent=1)
+            json.dump([{k: _json_value(r[k]) for k in fields} for r in rows], f, indent=1, ensure_ascii=False)
             f.write("\n")
     elif path.endswith(".csv"):
         with open(path, "w", newline="") as f:
             w = csv.DictWriter(f, fields, extrasaction="ignore")
             w.writeheader()
-            w.writerows({k: repr(v) if isinstance(v, float) else v for k, v in r.items()} for r in rows)
+            w.writerows({k: repr(float(v)) if isinstance(v, float) else v for k, v in r.items()} for r in rows)
     else:
         raise InputError(f"cannot write '{path}': name a .csv or .json file")
 
 
 def _json_value(v):
-    return None if isinstance(v, float) and not math.isfinite(v) else v
+    if isinstance(v, float):
+        return float(v) if math.isfinite(v) else None
+    return v
 
 
 def read_rows(path):

@@ -318,3 +318,56 @@ def test_work_precision_measures_a_click_opens_the_point_and_long_horizons_cance
     page.page.get_by_text("cancelled after").first.wait_for(timeout=5_000)
     assert time.monotonic() - clicked < 5
     page.check()
+
+
+def open_report_offline(browser, path, shot):
+    """Open a saved report from disk in a new offline context where every request but the file's
+    own is aborted; returns (other requests, console and page errors, data-plots, .uplot count)."""
+    url = path.resolve().as_uri()
+    ctx = browser.new_context(viewport={"width": 1200, "height": 900}, offline=True)
+    blocked, errors = [], []
+
+    def only_the_file(route):
+        if route.request.url == url:
+            route.continue_()
+        else:
+            blocked.append(route.request.url)
+            route.abort()
+
+    try:
+        ctx.route("**/*", only_the_file)
+        report = ctx.new_page()
+        report.set_default_timeout(WAIT_MS)
+        report.on("request", lambda r: r.url != url and blocked.append(r.url))
+        report.on("console", lambda m: m.type == "error" and errors.append(m.text))
+        report.on("pageerror", lambda e: errors.append(str(e)))
+        report.goto(url, wait_until="load")
+        report.wait_for_function("document.body.getAttribute('data-plots') !== null")
+        plots = report.evaluate("document.body.getAttribute('data-plots')")
+        drawn = report.locator(".uplot").count()
+        report.screenshot(path=str(ARTIFACTS / shot), full_page=True)
+        return sorted(set(blocked)), errors, plots, drawn
+    finally:
+        ctx.close()
+
+
+def test_download_report_saves_a_self_contained_file_that_draws_offline(page, browser):
+    page.open(query(scene="decaying"))
+    page.page.wait_for_selector("table.numbers")
+    deadline = time.monotonic() + WAIT_MS / 1000
+    while not page.plotted():
+        assert time.monotonic() < deadline, "no plotted data"
+        page.page.wait_for_timeout(200)
+    button = page.page.locator("button", has_text="Download report (HTML)")
+    with page.page.expect_download(timeout=60_000) as download:
+        button.click()
+    path = ARTIFACTS / "app-report.html"
+    download.value.save_as(path)
+    assert download.value.suggested_filename == "cosymp-report.html"
+    text = path.read_text(encoding="utf-8")
+    assert "cosymp report decaying --method midpoint --vs rk4" in text
+    assert "No report" not in text
+    page.check()
+    blocked, errors, plots, drawn = open_report_offline(browser, path, "app-report.png")
+    assert blocked == [] and errors == [], (blocked, errors)
+    assert plots == str(drawn) == "7", (plots, drawn)

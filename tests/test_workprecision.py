@@ -39,7 +39,10 @@ def test_rows_are_complete_and_honest(decaying_rows):
         assert r["status"] == "ok" and r["reference"] == "exact flow"
         assert r["steps"] * r["h"] == pytest.approx(2.0)
         assert 0 < r["wall_s"] < 1.0
-        assert r["error_abs"] >= r["error"] * 0 and r["error"] > 0
+        assert r["error"] > 0
+    # one reference for all: error_abs / error is its norm, the same in every row
+    scale = {round(r["error_abs"] / r["error"], 12) for r in decaying_rows}
+    assert len(scale) == 1
     for r in by_solver(decaying_rows, "midpoint") + by_solver(decaying_rows, "gauss6"):
         assert r["det_max_dev"] < 1e-14
     euler = by_solver(decaying_rows, "euler")
@@ -163,6 +166,13 @@ def test_cli_long(tmp_path):
     (["decaying", "--long", "--h", "0.1", "0.2"], "one --h"),
     (["decaying", "--long", "--horizons", "1e12"], "exceeds the cap"),
     (["decaying", "--methods", "boris"], "pushes a charge"),
+    (["decaying", "--out", "/nonexistent/dir/x.csv"], "not a writable folder"),
+    (["decaying", "--methods", "rk4", "--theta", "0.3"], "applies to the methods 'theta'"),
+    (["decaying", "--methods", "exact", "rk4"], "'exact' is the reference"),
+    (["decaying", "--max-steps", "3"], "below the first run's 10 steps"),
+    (["decaying", "--long", "--T", "5"], "drop --T"),
+    (["decaying", "--long", "--h", "1e300"], "not below the shortest horizon"),
+    (["decaying", "--long", "--h", "1e-3", "--horizons", "1e5"], "over this study's"),
 ])
 def test_cli_bad_input_one_line(argv, says):
     out, err = io.StringIO(), io.StringIO()
@@ -199,14 +209,70 @@ def test_drift_beyond_the_reference_is_a_nan_row():
     assert math.isnan(beyond["error"])
 
 
-def test_drift_cancel_stops_within_a_chunk():
+def test_drift_reports_every_chunk_so_cancel_is_prompt():
+    """1e6 steps of the method and 3e6 of the rk8 reference: progress at least once per CHUNK
+    steps, and an exception raised from it ends the run."""
     calls = []
+    wp.drift("modulated", ["midpoint"], h=0.1, horizons=[1e5], progress=lambda *a: calls.append(a[2]))
+    assert sum(label.startswith("midpoint") for label in calls) >= 1_000_000 // wp.CHUNK
+    assert sum(label.startswith("reference") for label in calls) >= 3_000_000 // wp.CHUNK
 
     def stop(done, total, label):
-        calls.append(label)
-        if len(calls) > 3:
+        if label.startswith("midpoint"):
             raise KeyboardInterrupt
 
     with pytest.raises(KeyboardInterrupt):
         wp.drift("modulated", ["midpoint"], h=0.1, horizons=[1e5], progress=stop)
-    assert len(calls) == 4
+
+
+def test_targets_compute_the_issues_ratios():
+    rows = [{"solver": s, "kind": k, "preserves": p, "wall_s": w, "error": e}
+            for s, k, p, pts in (("rk4", "cosymp", "none", ((1.0, 1e-5), (2.0, 1e-7), (4.0, 1e-10))),
+                                 ("gauss6", "cosymp", "symplectic", ((1.5, 1e-4), (3.0, 1e-8))),
+                                 ("scipy-DOP853", "scipy", "none", ((100.0, 1e-5), (1000.0, 1e-11))))
+            for w, e in pts]
+    t = wp.targets(rows)
+    rk4_6 = math.exp(0.5 * math.log(2.0))          # halfway between 1e-5 and 1e-7 in log-log
+    g6_6 = math.exp(math.log(1.5) + 0.5 * math.log(2.0))
+    assert t["cost"][1e-6]["rk4"] == pytest.approx(rk4_6)
+    assert t["ratios"][1e-6]["fastest"] == "rk4" and t["ratios"][1e-6]["best_symplectic"] == "gauss6"
+    assert t["ratios"][1e-6]["symplectic_over_rk4"] == pytest.approx(g6_6 / rk4_6)
+    dop = math.exp(math.log(100.0) + (1 / 6) * math.log(10.0))
+    assert t["ratios"][1e-6]["dop853_over_fastest"] == pytest.approx(dop / rk4_6)
+    assert math.isnan(t["cost"][1e-9]["gauss6"])
+
+
+def test_timed_leaves_out_the_warm_up():
+    import time
+
+    calls = []
+
+    def call():
+        calls.append(1)
+        time.sleep(0.2 if len(calls) == 1 else 0.001)
+        return len(calls)
+
+    first, best = wp.timed(call, budget=0.05)
+    assert first == 1 and best < 0.05 and len(calls) >= 3
+
+
+def test_huge_but_finite_states_keep_finite_errors():
+    """gamma = 10 on the damped oscillator: q(T) ~ 1e214, its square overflows, the state does not."""
+    rows = wp.measure("damped", ["gauss6"], {"gamma": 10.0}, T=50.0, hs=[0.01], budget=0.0)
+    assert rows[0]["status"] == "ok" and 0 < rows[0]["error"] < 1e-3 and math.isfinite(rows[0]["error_abs"])
+
+
+def test_drift_rows_round_trip_as_csv(tmp_path):
+    rows = wp.drift("damped", ["midpoint"], {"gamma": 2e-4}, h=0.1, horizons=[10.0, 100.0])
+    wp.write_rows(rows, tmp_path / "d.csv", wp.DRIFT_FIELDS)
+    back = wp.read_rows(tmp_path / "d.csv")
+    assert [b["H_ext_abs"] for b in back] == [float(r["H_ext_abs"]) for r in rows]
+    assert all(isinstance(b["error"], float) for b in back)
+
+
+def test_rk4_error_grows_quadratically_on_the_pendulum():
+    """The plain pendulum (kapitza without drive): RK4's energy drift changes its frequency, so
+    its phase error grows like T^2; the symplectic gauss4 keeps the energy and errs like T."""
+    rows = wp.drift("kapitza", ["rk4", "gauss4"], {"a": 0.0}, h=0.05, horizons=[500.0, 1e3, 2e3, 5e3, 1e4, 2e4])
+    assert wp.growth_exponent(rows, "rk4") > 1.7
+    assert wp.growth_exponent(rows, "gauss4") == pytest.approx(1.0, abs=0.15)
