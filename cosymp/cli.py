@@ -7,6 +7,7 @@ import argparse
 import json
 import math
 import os
+import shlex
 import sys
 
 from .errors import CosympError, InputError, RunError
@@ -183,7 +184,9 @@ def _report(args, out, err):
         if args.target == "paper":
             from .report.paper import paper_report
 
-            report = paper_report(bar, long=not args.quick, work_precision=not args.no_work_precision)
+            cmd = " ".join(["cosymp report paper"] + ["--quick"] * args.quick
+                           + ["--no-work-precision"] * args.no_work_precision + ["-o", shlex.quote(args.out)])
+            report = paper_report(bar, long=not args.quick, work_precision=not args.no_work_precision, command=cmd)
         else:
             from .report.scene import command, scene_report
 

@@ -35,7 +35,7 @@ def test_text_is_escaped_and_data_cannot_close_the_script():
                          [Section("s", [], [Figure("f", "x", "y", [Series("</script><b>", [0, 1], [1, np.nan])])])]))
     assert "<b>title</b>" not in html and "&lt;b&gt;title&lt;/b&gt;" in html
     assert "<script>alert(1)</script>" not in html
-    data = re.search(r'<script id="figures" type="application/json">(.*?)</script>', html, re.S).group(1)
+    data = re.search(r'<script id="figures" type="application/json">(.*?)</script>', html, re.DOTALL).group(1)
     spec = json.loads(data.replace("<\\/", "</"))
     assert spec[0]["series"][0]["label"] == "</script><b>" and spec[0]["series"][0]["y"] == [1, None]
 
@@ -60,6 +60,7 @@ def open_offline(path, shot, interact=False):
         page.goto(url, timeout=120_000)
         page.wait_for_function("document.body.getAttribute('data-plots') !== null", timeout=120_000)
         drawn = page.locator(".uplot canvas").count()
+        assert page.locator(".uplot .u-axis").count() == 2 * drawn, "every plot has its x and y axis"
         answers = {}
         if interact:
             plot = page.locator(".uplot").nth(1)

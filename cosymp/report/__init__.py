@@ -100,6 +100,16 @@ def envelope(x, y, max_points=MAX_POINTS):
     return x[keep], y[keep]
 
 
+def thin(x, y, max_points=MAX_POINTS):
+    """A parametric curve (x, y) reduced to at most max_points evenly spaced points, in order."""
+    x = np.asarray(x, float)
+    y = np.asarray(y, float)
+    if len(x) <= max_points:
+        return x, y
+    keep = np.unique(np.linspace(0, len(x) - 1, max_points).round().astype(int))
+    return x[keep], y[keep]
+
+
 def _number(v):
     if v is None or not math.isfinite(v):
         return "null"
@@ -113,7 +123,7 @@ def _array(values):
 def _figure_json(fig, key):
     series = []
     for i, s in enumerate(fig.series):
-        x, y = envelope(s.x, s.y)
+        x, y = thin(s.x, s.y) if fig.parametric else envelope(s.x, s.y)
         y = np.where(np.isfinite(y) & ((y > 0) | (not fig.logy)), y, np.nan)
         ok = np.isfinite(x) & ((x > 0) | (not fig.logx))
         x, y = x[ok], y[ok]
@@ -127,9 +137,12 @@ def _figure_json(fig, key):
 
 
 def _cell(v):
-    if isinstance(v, float):
-        return "–" if not math.isfinite(v) else f"{v:.3g}"
-    return html.escape(str(v))
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return f"<td>{html.escape(str(v))}</td>"
+    text = f"{v:.3g}" if isinstance(v, float) and math.isfinite(v) else ("–" if isinstance(v, float) else str(v))
+    return f'<td class="num">{text}</td>'
+
+
 
 
 def _paragraphs(texts):
@@ -159,7 +172,7 @@ def render(report):
                 body.append(f'<figure><div class="plot" id="{key}"></div>{cap}</figure>')
             else:
                 head = "".join(f"<th>{html.escape(str(c))}</th>" for c in item.columns)
-                rows = "".join("<tr>" + "".join(f"<td>{_cell(v)}</td>" for v in r) + "</tr>" for r in item.rows)
+                rows = "".join("<tr>" + "".join(_cell(v) for v in r) + "</tr>" for r in item.rows)
                 cap = f"<caption>{html.escape(item.caption)}</caption>" if item.caption else ""
                 body.append(f"<table>{cap}<thead><tr>{head}</tr></thead><tbody>{rows}</tbody></table>")
         body.append("</section>")

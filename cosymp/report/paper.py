@@ -21,10 +21,11 @@ OSCILLATORS = (
 )
 WP_SCENES = ("damped", "modulated")
 WP_METHODS = ("rk4", "rk8", "midpoint", "symplectic-euler", "gauss4", "gauss6")
+GAUGE_COLORS = dict(zip(charged.GAUGES, PALETTE))
 GAUGE_QUANTITIES = (("x", "q", 0), ("y", "q", 1), ("p_x", "p", 0), ("p_y", "p", 1), ("Π_x", "Pi", 0), ("Π_y", "Pi", 1))
 
 
-def paper_report(progress=None, long=True, work_precision=True):
+def paper_report(progress=None, long=True, work_precision=True, command="cosymp report paper -o paper.html"):
     """The report; `long=False` and `work_precision=False` leave out the long runs and the
     work-precision diagram (each a Section saying so) for a quick look."""
     stages = [("oscillator", o) for o in OSCILLATORS] + [("gauges", None)]
@@ -54,7 +55,7 @@ def paper_report(progress=None, long=True, work_precision=True):
         ("Long runs are shown as per-bin envelopes (the minimum and maximum over each bin of steps), so every "
         "step counts and no peak is lost while the file stays small."),
     ]
-    return Report("cosymp: the paper's numerical sections, recomputed", intro, sections, "cosymp report paper -o paper.html")
+    return Report("cosymp: the paper's numerical sections, recomputed", intro, sections, command)
 
 
 def _percent(tell, i, total, done, steps, what):
@@ -73,7 +74,9 @@ def _oscillator(name, title, values, long_values, T_long, long, progress):
     items = [
         Figure("Extended Hamiltonian H + p_t", "t", "H + p_t", [Series(m, c.run.t, c.run.H_ext[:, 0]) for m, c in runs],
                caption="The paper's Fig. 'extended Hamiltonian': H + p_t is conserved by the exact flow (0 with "
-                       "p_t(0) = −H(z0, 0)); the symplectic scheme keeps it oscillating near 0, RK4 lets it drift."),
+                       "p_t(0) = −H(z0, 0)). The first-order symplectic scheme's H + p_t oscillates with an "
+                       "amplitude set by h and does not grow; fourth-order RK4 errs less at first but drifts, which "
+                       "shows over the long run below."),
         Figure("Symplectic form: the paper's estimator ω(X¹, X²)", "t", "ω(X¹, X²)",
                [Series(m, c.run.t[1:], c.paper_omega) for m, c in runs],
                caption="As printed: ω of the one-step increments X = z_(k+1) − z_k of two nearby trajectories "
@@ -138,13 +141,15 @@ def _gauges():
     items = []
     for name, kind, k in GAUGE_QUANTITIES:
         items.append(Figure(f"{name} in the five gauges", "t", name,
-                            [Series(g, *_quantity(study[g]["per-gauge"], kind, k)) for g in charged.GAUGES],
+                            [Series(g, *_quantity(study[g]["per-gauge"], kind, k), color=GAUGE_COLORS[g])
+                             for g in charged.GAUGES],
                             caption="The paper's Fig. 'gauge' (trajectories, canonical and mechanical momenta), "
-                                    "one curve per gauge."))
+                                    "one curve per gauge; curves that coincide (x, y and Π in every gauge) hide "
+                                    "each other: click legend entries to compare."))
     t0, _ = _quantity(study["original"]["per-gauge"], "q", 0)
     for name, kind, k in GAUGE_QUANTITIES:
         base = _quantity(study["original"]["per-gauge"], kind, k)[1]
-        series = [Series(g, t0, np.abs(_quantity(study[g]["per-gauge"], kind, k)[1] - base))
+        series = [Series(g, t0, np.abs(_quantity(study[g]["per-gauge"], kind, k)[1] - base), color=GAUGE_COLORS[g])
                   for g in charged.GAUGES if g != "original"]
         items.append(Figure(f"|{name} − {name} (original gauge)|", "t", "difference", series, logy=True,
                             caption="The paper's Fig. 'differences with respect to the original gauge': for x, y and "
@@ -170,18 +175,21 @@ def _work_precision(name, progress):
                        dash=s.startswith("scipy"), points=True) for s in solvers]
 
     t = wp.targets(rows)
-    table = Table(["solver", "s to error 1e-6", "s to error 1e-9"],
-                  [[s, t["cost"][1e-6][s], t["cost"][1e-9][s]] for s in solvers]
-                  + [[f"scipy DOP853 / fastest ({r['fastest']})", t["ratios"][1e-6]["dop853_over_fastest"],
-                      t["ratios"][1e-9]["dop853_over_fastest"]] for r in (t["ratios"][1e-6],)],
+    costs = Table(["solver", "s to error 1e-6", "s to error 1e-9"],
+                  [[s, t["cost"][1e-6][s], t["cost"][1e-9][s]] for s in solvers],
                   caption="Wall time to reach each error (log–log interpolation; – where not reached).")
+    ratios = Table(["at error", "fastest cosymp method", "scipy DOP853 / fastest", "best symplectic",
+                    "best symplectic / rk4"],
+                   [[f"{e:.0e}", r["fastest"], r["dop853_over_fastest"], r["best_symplectic"], r["symplectic_over_rk4"]]
+                    for e, r in t["ratios"].items()], caption="The ratios of the costs above.")
     scene = SCENES[name]
     return Section(f"Work against precision: {name} (T = {scene.T:g})", [
         ("Each cosymp method over step sizes and scipy's solve_ivp (RK45, DOP853, LSODA) over tolerances on the same "
         f"extended ODE; error at T relative to {rows[0]['reference']}; wall time the minimum of repeated runs "
         "after a warm-up. Not in the paper: it answers what each method costs for its accuracy.")], [
         Figure("Relative error at T against wall time", "wall time (s)", "relative error",
-               series("error"), logx=True, logy=True),
+               series("error"), logx=True, logy=True, parametric=True,
+               caption="Each line joins one solver's runs in order of step size or tolerance."),
         Figure("max |H + p_t| against wall time", "wall time (s)", "max |H + p_t|", series("H_ext_max_abs"),
-               logx=True, logy=True),
-        table])
+               logx=True, logy=True, parametric=True),
+        costs, ratios])

@@ -19,23 +19,64 @@
     return out.length ? out : [min, max];
   }
 
-  function axis(label, log, size) {
-    var a = {label: label, size: size};
+  function steps(u, axisIdx, min, max) {
+    /* 1-2-5 ticks at any magnitude (uPlot's own tables stop near 1e-16) */
+    var span = max - min;
+    if (!(span > 0)) return [min];
+    var raw = span / 6, mag = Math.pow(10, Math.floor(Math.log10(raw))), step = 10 * mag;
+    [1, 2, 5].forEach(function (m) { if (m * mag >= raw && m * mag < step) step = m * mag; });
+    var out = [], first = Math.ceil(min / step);
+    for (var i = 0; (first + i) * step <= max; i++) out.push((first + i) * step);
+    return out;
+  }
+
+  function tick(v) {
+    var a = Math.abs(v);
+    return (a !== 0 && (a < 1e-3 || a >= 1e5)) ? v.toExponential(2) : String(parseFloat(v.toPrecision(4)));
+  }
+
+  function axis(label, log, vertical) {
+    var a = {label: label};
     if (log) {
       a.splits = decades;
       a.values = function (u, vals) {
         return vals.map(function (v) { return v == null ? "" : (v === Math.round(v) ? "1e" + v : fmt(Math.pow(10, v))); });
       };
     } else {
-      a.values = function (u, vals) {
-        return vals.map(function (v) { return v == null ? "" : String(parseFloat(v.toPrecision(6))); });
+      a.splits = steps;
+      a.values = function (u, vals) { return vals.map(function (v) { return v == null ? "" : tick(v); }); };
+    }
+    if (vertical) {
+      /* wide enough for the longest tick label, plus the axis label */
+      a.size = function (u, values) {
+        var n = (values || []).reduce(function (m, v) { return Math.max(m, String(v).length); }, 3);
+        return 34 + 7 * n;
       };
     }
     return a;
   }
 
+  function padded(u, min, max) {
+    /* linear ranges around the data's own size (uPlot's default falls back to 0..100 for tiny spans) */
+    if (min == null || max == null) return [0, 1];
+    var span = max - min, size = Math.max(Math.abs(min), Math.abs(max));
+    var pad = span > 1e-12 * size ? 0.05 * span : (size > 0 ? 0.05 * size : 1);
+    return [min - pad, max + pad];
+  }
+
   function readout(log) {
     return function (u, v) { return fmt(v == null ? null : (log ? Math.pow(10, v) : v)); };
+  }
+
+  function polyline(u, sidx, i0, i1) {
+    /* a parametric curve in its own order (uPlot's linear paths assume x sorted) */
+    var xs = u.data[sidx][0], ys = u.data[sidx][1], p = new Path2D(), open = false;
+    for (var i = i0; i <= i1; i++) {
+      if (xs[i] == null || ys[i] == null) { open = false; continue; }
+      var px = u.valToPos(xs[i], "x", true), py = u.valToPos(ys[i], "y", true);
+      if (open) p.lineTo(px, py); else { p.moveTo(px, py); open = true; }
+    }
+    return {stroke: p, fill: null, clip: null, band: null, gaps: null, flags: 0};
   }
 
   function panZoom() {
@@ -83,15 +124,15 @@
       };
       if (spec.parametric) {
         one.facets = [{scale: "x", auto: true}, {scale: "y", auto: true}];
-        one.paths = uPlot.paths.linear();
+        one.paths = polyline;
       }
       series.push(one);
     });
     var width = Math.max(320, Math.min(el.parentNode.clientWidth || 900, 1100));
     plots.push(new uPlot({
       mode: spec.parametric ? 2 : 1, title: spec.title, width: width, height: 340, series: series, plugins: [panZoom()],
-      scales: {x: {time: false}},
-      axes: [axis(spec.xlabel, spec.logx), axis(spec.ylabel, spec.logy, 70)],
+      scales: {x: {time: false}, y: {range: padded}},
+      axes: [axis(spec.xlabel, spec.logx, false), axis(spec.ylabel, spec.logy, true)],
       cursor: {drag: {x: true, y: true, uni: 20}},
       legend: {live: !spec.parametric}
     }, data, el));

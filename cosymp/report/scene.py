@@ -56,8 +56,9 @@ def scene_report(setups, h, T, cmd, progress=None, computed=None):
     numbers = Table(["method", "max |H + p_t|", "max |det M_k − 1|", "max ||MᵀJM − J||", "final error", "steps",
                      "integration time (s)", "stopped"],
                     [_numbers(s, c, failure, err) for s, c, failure, err in runs],
-                    caption="Figures over every step (final error against the exact flow, else a fine rk8 "
-                            "reference; integration time of the run with its nearby trajectories)")
+                    caption="Figures over every step (final error against "
+                            + ("the exact flow" if scene.has_flow else "rk8 at a fine step")
+                            + "; integration time of the run with its nearby trajectories)")
     ok = [(s, c) for s, c, _, _ in runs if c is not None]
     sections = [
         Section("Scene and methods", [scene.summary, "Look for: " + scene.look_for, *scene.notes,
