@@ -772,6 +772,11 @@ class Measured:
     horizons: tuple = ()
     peers: bool = False
 
+    @property
+    def method_theta(self):
+        """θ for the methods that take one, None when none of them does."""
+        return next((th for _, th in self.solvers.values() if th is not None), None)
+
     def describe(self):
         values = ", ".join(f"{k} = {v}" for k, v in self.values.items())
         what = [f"T = {self.T:g}"] if self.T is not None else [f"h = {self.h:g}", f"T up to {self.horizons[-1]:g}"]
@@ -828,7 +833,7 @@ class WorkPrecision(Background):
         return f"{job.describe()}; {len(job.solvers)} methods{peers}"
 
     def _compute(self, job, progress):
-        return wp.measure(job.scene, [m for m, _ in job.solvers.values()], job.values, job.T, theta=job.theta,
+        return wp.measure(job.scene, [m for m, _ in job.solvers.values()], job.values, job.T, theta=job.method_theta,
                           peers=job.peers, rtols=WP_RTOLS, max_steps=WP_MAX_STEPS, budget=WP_BUDGET,
                           progress=progress)
 
@@ -898,7 +903,7 @@ class LongHorizons(Background):
 
     def _compute(self, job, progress):
         return wp.drift(job.scene, [m for m, _ in job.solvers.values()], job.values, job.h, list(job.horizons),
-                        theta=job.theta, progress=progress)
+                        theta=job.method_theta, progress=progress)
 
     def _finish(self, job, rows):
         short = [r for r in rows if r["status"].startswith(wp.REFERENCE_SHORT)]
