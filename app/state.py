@@ -121,11 +121,6 @@ def inputs_class(scene_name):
     return param.parameterized_class(f"{scene_name.title()}Inputs", params)
 
 
-def method_label(name, theta):
-    m = METHODS[name]
-    return f"{name} (θ = {theta:g})" if m.takes_theta else name
-
-
 def theta_for(method, theta):
     return theta if METHODS[method].takes_theta else None
 
@@ -158,7 +153,7 @@ def run_pair(scene, setups, h, T):
         done = list(pool.map(lambda s: compare_until_failure(s, h, T), setups))
     entries = []
     for s, (comparison, failure) in zip(setups, done):
-        label = method_label(s.method.name, s.theta)
+        label = s.method.label(s.theta)
         if any(e.label == label for e in entries):
             label += " (2)"
         entries.append(Entry(label, s.method.name, comparison, failure))
@@ -482,9 +477,9 @@ class GaugeStudy(Follower):
     def _compute(self, job):
         method, values, h, T, theta = job
         try:
-            return method_label(method, theta), gauge_study(method, values, h, T, theta), ""
+            return METHODS[method].label(theta), gauge_study(method, values, h, T, theta), ""
         except RunError as err:
-            return method_label(method, theta), None, str(err)
+            return METHODS[method].label(theta), None, str(err)
 
     def _apply(self, result):
         label, data, failure = result
@@ -574,7 +569,7 @@ class LongRun(param.Parameterized):
         s = self.study
         width = max(1, math.ceil(steps / LONG_BINS))
         cap = width * max(1, min(max_chunk(x) for x in setups) // width)
-        labels = [method_label(x.method.name, x.theta) for x in setups]
+        labels = [x.method.label(x.theta) for x in setups]
         values = ", ".join(f"{k} = {v}" for k, v in s.values.items())
         self.setting = (f"{s.scene}: {' vs '.join(labels)}, h = {h:g}, T = {steps * h:g}"
                         + (f", {values}" if values else ""))

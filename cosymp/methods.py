@@ -89,6 +89,10 @@ class Method:
     takes_theta: bool = False
     requires: str = ""
 
+    def label(self, theta=None):
+        """The method's name, with its θ for the methods that take one (a plot legend's label)."""
+        return f"{self.name} (θ = {theta:g})" if self.takes_theta else self.name
+
     def order_at(self, theta):
         if self.takes_theta:
             return 2 if theta == 0.5 else 1

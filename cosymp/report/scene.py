@@ -27,10 +27,6 @@ def command(setups, h, T, out="report.html"):
     return " ".join(shlex.quote(a) for a in args + ["-o", out])
 
 
-def label(setup):
-    return setup.method.name + (f" (θ = {setup.theta:g})" if setup.theta is not None else "")
-
-
 def scene_report(setups, h, T, cmd, progress=None, computed=None):
     """A Report of the setups (method and the method it is compared with) on their scene.
     computed: their (Comparison or None, failure message) pairs if already at hand (the app's)."""
@@ -39,12 +35,12 @@ def scene_report(setups, h, T, cmd, progress=None, computed=None):
     total = 2 * len(setups)
     runs = []
     for i, s in enumerate(setups):
-        report(2 * i, total, f"{label(s)}: run and diagnostics")
+        report(2 * i, total, f"{s.method.label(s.theta)}: run and diagnostics")
         if computed is None:
             c, failure = compare_until_failure(s, h, T, delta=DELTA, cloud_points=CLOUD_POINTS)
         else:
             c, failure = computed[i]
-        report(2 * i + 1, total, f"{label(s)}: reference")
+        report(2 * i + 1, total, f"{s.method.label(s.theta)}: reference")
         err = None
         if c is not None and c.error is None and not failure:
             z_ref, _ = reference_final(s, h, T)
@@ -62,7 +58,7 @@ def scene_report(setups, h, T, cmd, progress=None, computed=None):
     ok = [(s, c) for s, c, _, _ in runs if c is not None]
     sections = [
         Section("Scene and methods", [scene.summary, "Look for: " + scene.look_for, *scene.notes,
-                                      *[f"{label(s)}: {s.method.doc}." for s in setups]], [params, numbers]),
+                                      *[f"{s.method.label(s.theta)}: {s.method.doc}." for s in setups]], [params, numbers]),
         Section("Orbits and the extended Hamiltonian", [
             ("The phase portrait of each method and H + p_t along the run (0 for the exact flow; a symplectic "
             "method keeps it bounded, a non-preserving one lets it drift).")], _orbit_figures(scene, ok)),
@@ -72,44 +68,44 @@ def scene_report(setups, h, T, cmd, progress=None, computed=None):
             "of the one-step increments of nearby trajectories (they follow the increments' size, so they are "
             "not constant even for a symplectic map).")], _structure_figures(ok)),
     ]
-    return Report(f"cosymp report: {scene.title}, {' vs '.join(label(s) for s in setups)}",
+    return Report(f"cosymp report: {scene.title}, {' vs '.join(s.method.label(s.theta) for s in setups)}",
                   [f"h = {h:g}, T = {T:g}."], sections, cmd)
 
 
 def _numbers(s, c, failure, err):
     if c is None:
-        return [label(s), np.nan, np.nan, np.nan, np.nan, 0, np.nan, failure]
+        return [s.method.label(s.theta), np.nan, np.nan, np.nan, np.nan, 0, np.nan, failure]
     n = c.summary
     final = n["final error"] if n["final error"] is not None else (np.nan if err is None else err)
-    return [label(s), n["max |H + p_t|"], n["max |det M - 1|"], n["max |M^T J M - J|"], final, n["steps"],
+    return [s.method.label(s.theta), n["max |H + p_t|"], n["max |det M - 1|"], n["max |M^T J M - J|"], final, n["steps"],
             c.run.wall_s, failure or "no"]
 
 
 def _orbit_figures(scene, runs):
     figs = []
     if scene.name == "charged":
-        figs.append(Figure("Orbit in the plane", "x", "y", [Series(label(s), c.run.q[:, 0, 0], c.run.q[:, 0, 1])
+        figs.append(Figure("Orbit in the plane", "x", "y", [Series(s.method.label(s.theta), c.run.q[:, 0, 0], c.run.q[:, 0, 1])
                                                             for s, c in runs], parametric=True))
     else:
-        figs.append(Figure("Phase portrait", "q", "p", [Series(label(s), c.run.q[:, 0, 0], c.run.p[:, 0, 0])
+        figs.append(Figure("Phase portrait", "q", "p", [Series(s.method.label(s.theta), c.run.q[:, 0, 0], c.run.p[:, 0, 0])
                                                         for s, c in runs], parametric=True))
     figs.append(Figure("Extended Hamiltonian H + p_t", "t", "H + p_t",
-                       [Series(label(s), c.run.t, c.run.H_ext[:, 0]) for s, c in runs]))
+                       [Series(s.method.label(s.theta), c.run.t, c.run.H_ext[:, 0]) for s, c in runs]))
     if all(c.error is not None for _, c in runs):
         figs.append(Figure("Error against the exact flow", "t", "|z − z_exact|",
-                           [Series(label(s), c.run.t, c.error) for s, c in runs], logy=True))
+                           [Series(s.method.label(s.theta), c.run.t, c.error) for s, c in runs], logy=True))
     return figs
 
 
 def _structure_figures(runs):
     return [
         Figure("|det M_k − 1| of the one-step maps", "t", "|det M_k − 1|",
-               [Series(label(s), c.run.t[:-1], c.det_dev) for s, c in runs], logy=True,
+               [Series(s.method.label(s.theta), c.run.t[:-1], c.det_dev) for s, c in runs], logy=True,
                caption="Exact zeros are not drawn on the log axis."),
         Figure("||M_kᵀ J M_k − J|| of the one-step maps", "t", "symplecticity defect",
-               [Series(label(s), c.run.t[:-1], c.symp_dev) for s, c in runs], logy=True),
+               [Series(s.method.label(s.theta), c.run.t[:-1], c.symp_dev) for s, c in runs], logy=True),
         Figure("The paper's symplectic-form estimator ω(X¹, X²)", "t", "ω(X¹, X²)",
-               [Series(label(s), c.run.t[1:], c.paper_omega) for s, c in runs]),
+               [Series(s.method.label(s.theta), c.run.t[1:], c.paper_omega) for s, c in runs]),
         Figure("The paper's volume-form estimator det[X¹ X² X³]", "t", "det",
-               [Series(label(s), c.run.t[1:], c.paper_volume) for s, c in runs]),
+               [Series(s.method.label(s.theta), c.run.t[1:], c.paper_volume) for s, c in runs]),
     ]
