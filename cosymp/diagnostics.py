@@ -18,6 +18,17 @@ def J(n):
     return np.block([[np.zeros((n, n)), np.eye(n)], [-np.eye(n), np.zeros((n, n))]])
 
 
+def norm(v, axis=-1):
+    """The 2-norm over an axis without overflow or underflow for huge or tiny finite entries
+    (the damped scene's state reaches 1e300 while staying finite)."""
+    v = np.asarray(v, dtype=float)
+    scale = np.max(np.abs(v), axis=axis, keepdims=True)
+    ok = (scale > 0) & np.isfinite(scale)
+    unit = np.divide(v, scale, out=np.zeros_like(v), where=ok)
+    out = np.where(ok, scale, 1.0) * np.linalg.norm(unit, axis=axis, keepdims=True)
+    return np.squeeze(np.where(ok, out, scale), axis=axis)
+
+
 def omega(X, Y):
     """Canonical 2-form sum_i X_qi Y_pi - X_pi Y_qi over the last axis (q then p)."""
     n = X.shape[-1] // 2

@@ -129,6 +129,13 @@ def initial_states(setup, z0=None):
     return np.ascontiguousarray(z0)
 
 
+def default_stride(steps, members, m, increments=False):
+    """simulate's default stride: every step while the records (members x (m + 1) values, three
+    times that with increments) fit in MAX_RECORDED values, else the smallest stride that fits."""
+    per_record = members * (m + 1) * (3 if increments else 1)
+    return max(1, math.ceil(steps * per_record / MAX_RECORDED))
+
+
 def simulate(setup, h, T, z0=None, stride=None, increments=False, t0=0.0, pt0=None):
     """Run setup's method from t0 for T (rounded up to whole steps of h) on N initial states.
 
@@ -141,7 +148,7 @@ def simulate(setup, h, T, z0=None, stride=None, increments=False, t0=0.0, pt0=No
     N, m = Z.shape
     per_record = N * (m + 1) * (3 if increments else 1)
     if stride is None:
-        stride = max(1, math.ceil(steps * per_record / MAX_RECORDED))
+        stride = default_stride(steps, N, m, increments)
     elif not isinstance(stride, (int, np.integer)) or stride < 1:
         raise InputError(f"stride = {stride} must be a positive whole number")
     K = steps // stride + 1
@@ -166,7 +173,7 @@ def simulate(setup, h, T, z0=None, stride=None, increments=False, t0=0.0, pt0=No
                        dZrec[:kept] if increments else None, done, wall)
     if status != OK:
         t_fail = t0 + done * h
-        traj.failure = failure_message(status, done, t_fail, h)
+        traj.failure = failure_message(status, round(t0 / h) + done, t_fail, h)
         raise RunError(traj.failure, t_fail, done, traj)
     return traj
 
@@ -180,7 +187,8 @@ def _trajectory(setup, h, stride, T, Z, PT, dZ, steps, wall):
 def failure_message(status, step, t, h):
     where = f"in step {step + 1} (from t = {t:.6g})"
     if status == OVERFLOW:
-        return f"overflow {where}: the state is no longer finite; reduce h or shorten T"
+        return (f"overflow {where}: the state left floating-point range (|z| > 1.8e308); shorten T, "
+                f"or reduce h if the solution should stay bounded")
     if status == NEWTON:
         return f"Newton did not converge {where}: reduce h"
     if status == SINGULAR:

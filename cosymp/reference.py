@@ -3,6 +3,7 @@ import math
 
 import numpy as np
 
+from .diagnostics import norm
 from .integrate import Setup, check_step, initial_states, simulate
 from .kernels.loops import energies, vector_field
 
@@ -26,7 +27,7 @@ def reference_final(setup, h, T, z0=None):
     a = simulate(fine, h / k, t_final, z0=z0, stride=steps * k)
     if steps * k % 2 == 0:
         b = simulate(fine, 2 * h / k, t_final, z0=z0, stride=steps * k // 2)
-        spread = np.linalg.norm(a.z[-1] - b.z[-1], axis=-1)
+        spread = norm(a.z[-1] - b.z[-1])
     else:
         spread = np.full(a.z.shape[1], np.nan)
     return a.z[-1], spread

@@ -13,6 +13,7 @@ from .diagnostics import (
     det_deviation,
     loop_action,
     nearby_states,
+    norm,
     paper_symplectic_form,
     paper_volume_form,
     ring_states,
@@ -89,7 +90,7 @@ def compare(setup, h, T, delta=1e-4, cloud_points=0, cloud_radius=0.05, stride=N
     if setup.scene.has_flow:
         exact = simulate(Setup.make(setup.scene, "exact", setup.values), h * run.stride,
                          run.steps * h, z0=base[None])
-        error = np.linalg.norm(run.z[:, 0] - exact.z[: len(run.t), 0], axis=-1)
+        error = norm(run.z[:, 0] - exact.z[: len(run.t), 0])
     Pi = None
     if setup.scene.name == "charged":
         Pi = charged.mechanical(setup.P, run.t, run.q[:, 0], run.p[:, 0])

@@ -29,7 +29,7 @@ from functools import partial
 
 import numpy as np
 
-from .diagnostics import det_deviation, tangent_maps
+from .diagnostics import det_deviation, norm, tangent_maps
 from .errors import InputError, RunError
 from .integrate import MAX_STEPS, Setup, check_step, get_scene, simulate
 from .kernels.families import Composition, Exact, Explicit, Gauss
@@ -114,17 +114,9 @@ def timed(call, budget):
     return result, best
 
 
-def norm(v):
-    """The 2-norm without overflow for entries beyond 1e154 (the state may be huge yet finite)."""
-    scale = float(np.max(np.abs(v)))
-    if scale == 0.0 or not math.isfinite(scale):
-        return scale
-    return scale * float(np.linalg.norm(np.asarray(v) / scale))
-
-
 def _relative(z, z_ref):
-    err = norm(np.asarray(z) - np.asarray(z_ref))
-    return err / max(norm(z_ref), np.finfo(float).tiny), err
+    err = float(norm(np.ravel(np.asarray(z) - np.asarray(z_ref))))
+    return err / max(float(norm(np.ravel(z_ref))), np.finfo(float).tiny), err
 
 
 def peer_solve(setup, solver, T, rtol):

@@ -1,9 +1,16 @@
-"""The generic compiled loops: every scene and every method family runs through these."""
+"""The generic compiled loops: every scene and every method family runs through these.
+
+Each step is taken in the scene's scaled coordinates (scenes.base.SceneKernel.scaling): the state
+is scaled by exact powers of two and the coefficients are read at the shifted time, so that a
+step's arithmetic stays in floating-point range while the state does.
+"""
+import math
+
 import numpy as np
 from numba import njit
 
 from .borrow import borrow
-from .dispatch import INLINE, JIT, coef, dhdt, energy, grad, lmatrix, lwork, ncoef, ndof, step, work
+from .dispatch import INLINE, JIT, coef, dhdt, energy, grad, lmatrix, lwork, ncoef, ndof, scaling, step, work
 from .families import OK, OVERFLOW
 from .stack import coef_table, matrices, vectors
 
@@ -20,6 +27,15 @@ def _coefs(P, offsets, tk, tk1, h, C, reuse):
                 C[0, c] = C[u - 1, c]
         else:
             coef(P, tk1 if offsets[j] == 1.0 else tk + offsets[j] * h, C, j)
+
+
+@njit(**INLINE)
+def _rescale(z, n, e):
+    """q <- q 2^e, p <- p 2^-e in place (exact; e = 0 leaves z alone)."""
+    if e != 0:
+        for i in range(n):
+            z[i] = math.ldexp(z[i], e)
+            z[n + i] = math.ldexp(z[n + i], -e)
 
 
 @njit(**INLINE)
@@ -69,30 +85,36 @@ def propagate_matrix(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZre
     LW = lwork(D, P)
     MQ = matrices(P, 2, 0.0)
     M, Q = MQ[0], MQ[1]
-    V = vectors(P, 2, 0.0)
-    z, old = V[0], V[1]
+    V = vectors(P, 3, 0.0)
+    z, old, zs = V[0], V[1], V[2]
     m = 2 * ndof(P)
     u = len(D.offsets)
     can_reuse = u > 1 and D.offsets[0] == 0.0 and D.offsets[u - 1] == 1.0
     _record_start(t0, Z, PT, Trec, Zrec, PTrec, dZrec, m)
     rec = 1
+    prev = 0
     for k in range(nsteps):
-        tk = t0 + k * h
-        _coefs(P, D.offsets, tk, t0 + (k + 1) * h, h, C, can_reuse and k > 0)
+        e, tau = scaling(P, t0 + k * h)
+        tk = t0 + k * h - tau
+        _coefs(P, D.offsets, tk, t0 + (k + 1) * h - tau, h, C, can_reuse and k > 0 and e == prev)
+        prev = e
         s = lmatrix(D, P, C, tk, h, M, Q, LW)
         recording = (k + 1) % stride == 0
         for i in range(Z.shape[0]):
             quad = 0.0
             for r in range(m):
                 old[r] = Z[i, r]
+                zs[r] = old[r]
+            _rescale(zs, m // 2, -e)
             for r in range(m):
                 acc = 0.0
                 qr = 0.0
                 for c in range(m):
-                    acc += M[r, c] * old[c]
-                    qr += Q[r, c] * old[c]
+                    acc += M[r, c] * zs[c]
+                    qr += Q[r, c] * zs[c]
                 z[r] = acc
-                quad += old[r] * qr
+                quad += zs[r] * qr
+            _rescale(z, m // 2, e)
             status = _accept(OK, i, z, old, PT[i] - (0.5 * quad + s), Z, PT, rec, recording, Zrec, PTrec,
                              dZrec, m)
             if status != OK:
@@ -117,15 +139,20 @@ def propagate_members(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZr
     can_reuse = u > 1 and D.offsets[0] == 0.0 and D.offsets[u - 1] == 1.0
     _record_start(t0, Z, PT, Trec, Zrec, PTrec, dZrec, m)
     rec = 1
+    prev = 0
     for k in range(nsteps):
-        tk = t0 + k * h
-        _coefs(P, D.offsets, tk, t0 + (k + 1) * h, h, C, can_reuse and k > 0)
+        e, tau = scaling(P, t0 + k * h)
+        tk = t0 + k * h - tau
+        _coefs(P, D.offsets, tk, t0 + (k + 1) * h - tau, h, C, can_reuse and k > 0 and e == prev)
+        prev = e
         recording = (k + 1) % stride == 0
         for i in range(Z.shape[0]):
             for r in range(m):
                 old[r] = Z[i, r]
                 z[r] = old[r]
+            _rescale(z, m // 2, -e)
             status, pt = step(D, P, C, tk, h, z, PT[i], W)
+            _rescale(z, m // 2, e)
             status = _accept(status, i, z, old, pt, Z, PT, rec, recording, Zrec, PTrec, dZrec, m)
             if status != OK:
                 return status, k
@@ -138,33 +165,41 @@ def propagate_members(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZr
 @njit(**JIT)
 def tangent_matrix(D, P, h, T, Z, PT, M):
     """One-step tangent maps M[k] = d z_(k+1) / d z_k at t = T[k] of a linear scene: the step
-    matrix itself."""
+    matrix itself, in the step's scaled coordinates (identical where the scene has no scaling;
+    det and symplecticity do not depend on that symplectic scaling)."""
     D, P, T, M = borrow((D, P, T, M))
     C = coef_table(D, P)
     LW = lwork(D, P)
     Q = matrices(P, 1, 0.0)[0]
     for k in range(T.shape[0]):
-        _coefs(P, D.offsets, T[k], T[k] + h, h, C, False)
-        lmatrix(D, P, C, T[k], h, M[k], Q, LW)
+        tau = scaling(P, T[k])[1]
+        _coefs(P, D.offsets, T[k] - tau, T[k] + h - tau, h, C, False)
+        lmatrix(D, P, C, T[k] - tau, h, M[k], Q, LW)
     return OK, T.shape[0]
 
 
 @njit(**JIT)
 def tangent_complex(D, P, h, T, Z, PT, M):
     """One-step tangent maps M[k] = d z_(k+1) / d z_k on the time slice t = T[k], by complex
-    step on the member step: exact to round-off (no subtraction)."""
+    step on the member step: exact to round-off (no subtraction). In the step's scaled
+    coordinates, as tangent_matrix."""
     D, P, T, Z, PT, M = borrow((D, P, T, Z, PT, M))
     C = coef_table(D, P)
     W = work(D, P, 0j)
     zc = vectors(P, 1, 0j)[0]
     m = 2 * ndof(P)
+    zs = vectors(P, 1, 0.0)[0]
     for k in range(Z.shape[0]):
-        _coefs(P, D.offsets, T[k], T[k] + h, h, C, False)
+        e, tau = scaling(P, T[k])
+        _coefs(P, D.offsets, T[k] - tau, T[k] + h - tau, h, C, False)
+        for r in range(m):
+            zs[r] = Z[k, r]
+        _rescale(zs, m // 2, -e)
         for j in range(m):
             for r in range(m):
-                zc[r] = Z[k, r]
+                zc[r] = zs[r]
             zc[j] += 1j * COMPLEX_STEP
-            status, _ = step(D, P, C, T[k], h, zc, PT[k] + 0j, W)
+            status, _ = step(D, P, C, T[k] - tau, h, zc, PT[k] + 0j, W)
             if status != OK:
                 return status, k
             for r in range(m):
@@ -188,10 +223,14 @@ def tangent(setup):
 def energies(P, T, Z, out):
     """H at recorded states: T (K,), Z (K, N, 2n) -> out (K, N)."""
     C = np.empty((1, ncoef(P)))
+    zs = np.empty(Z.shape[2])
     for k in range(T.shape[0]):
-        coef(P, T[k], C, 0)
+        e, tau = scaling(P, T[k])
+        coef(P, T[k] - tau, C, 0)
         for i in range(Z.shape[1]):
-            out[k, i] = energy(P, C, 0, Z[k, i])
+            zs[:] = Z[k, i]
+            _rescale(zs, Z.shape[2] // 2, -e)
+            out[k, i] = energy(P, C, 0, zs)
 
 
 @njit(**JIT)
@@ -199,10 +238,13 @@ def vector_field(P, t, z, out):
     """The extended vector field (dq/dt, dp/dt, dp_t/dt) at (z, t), for reference solvers."""
     n = ndof(P)
     C = np.empty((1, ncoef(P)))
-    coef(P, t, C, 0)
+    e, tau = scaling(P, t)
+    coef(P, t - tau, C, 0)
+    zs = z.copy()
+    _rescale(zs, n, -e)
     g = np.empty(2 * n)
-    grad(P, C, 0, z, g)
+    grad(P, C, 0, zs, g)
     for i in range(n):
-        out[i] = g[n + i]
-        out[n + i] = -g[i]
-    out[2 * n] = -dhdt(P, C, 0, z)
+        out[i] = math.ldexp(g[n + i], e)
+        out[n + i] = -math.ldexp(g[i], -e)
+    out[2 * n] = -dhdt(P, C, 0, zs)

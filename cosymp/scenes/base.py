@@ -4,8 +4,16 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
 from ..errors import InputError
+from ..kernels.dispatch import INLINE
+
+
+@njit(**INLINE)
+def unscaled(P, t):
+    """The scaling of a scene whose coefficients stay in range: none (see SceneKernel)."""
+    return 0, 0.0
 
 
 @dataclass(frozen=True)
@@ -37,7 +45,15 @@ class Param:
 
 @dataclass(frozen=True)
 class SceneKernel:
-    """The jitted functions the compiled loops dispatch to (see cosymp.kernels.dispatch)."""
+    """The jitted functions the compiled loops dispatch to (see cosymp.kernels.dispatch).
+
+    scaling(P, t) -> (e, tau) declares a symmetry that keeps a step's arithmetic in floating-point
+    range: H(q, p, t) = H(2^-e q, 2^e p, t - tau) for the step from t. The loops then take that
+    step on the scaled state (q 2^-e, p 2^e) with coefficients at t - tau, and scale back. The
+    scaling is symplectic and constant within the step, and powers of two are exact, so every
+    method takes the same step up to rounding; only values that would overflow (coefficients e^{gamma t} of the
+    damped scene) stay finite while the state does.
+    """
 
     ndof: int
     ncoef: int
@@ -51,6 +67,7 @@ class SceneKernel:
     vecpot: Callable = None
     efield: Callable = None
     bfield: Callable = None
+    scaling: Callable = unscaled
 
 
 @dataclass(frozen=True)

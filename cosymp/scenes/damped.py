@@ -1,4 +1,5 @@
 """The Caldirola-Kanai oscillator exactly as printed in the paper (Sec. 4.1)."""
+import math
 from collections import namedtuple
 
 import numpy as np
@@ -25,6 +26,16 @@ def coef(P, t, C, r):
 
 
 @njit(**INLINE)
+def scaling(P, t):
+    """H(q, p, t) = H(q/E, p E, t - tau) with E^2 = e^{gamma tau}: the step from t is taken with
+    E = 2^e nearest to e^{gamma t/2}, so the coefficients e^{+-gamma t} stay near 1 at any t."""
+    if P.gamma == 0.0:
+        return 0, 0.0
+    e = round(P.gamma * t / (2.0 * math.log(2.0)))
+    return e, 2.0 * e * math.log(2.0) / P.gamma
+
+
+@njit(**INLINE)
 def flow(P, t0, t1, z):
     """Exact flow of q'' - gamma q' + w0 q = 0 with p = m e^{-gamma t} q'.
 
@@ -45,10 +56,10 @@ def flow(P, t0, t1, z):
         C = 1.0
         S = s
     q, p = z[0], z[1]
-    grow = np.exp(P.gamma * t0)
+    root = np.exp(0.5 * P.gamma * t0)
     half = np.exp(0.5 * P.gamma * s)
-    z[0] = half * (q * C + (grow * p / P.m - 0.5 * P.gamma * q) * S)
-    z[1] = (p * C + (0.5 * P.gamma * p - P.m * P.w0 * q / grow) * S) / half
+    z[0] = half * (q * C + (root * (root * p) / P.m - 0.5 * P.gamma * q) * S)
+    z[1] = (p * C + (0.5 * P.gamma * p - P.m * P.w0 * (q / root) / root) * S) / half
 
 
 SCENE = Scene(
@@ -73,7 +84,7 @@ SCENE = Scene(
     ),
     kernel=SceneKernel(ndof=1, ncoef=quadratic.ncoef(1), linear=True, coef=coef,
                        energy=quadratic.energy, grad=quadratic.grad, hess=quadratic.hess,
-                       dhdt=quadratic.dhdt, flow=flow),
+                       dhdt=quadratic.dhdt, flow=flow, scaling=scaling),
     Params=DampedParams,
     h=0.1,
     T=50.0,
