@@ -92,9 +92,12 @@ class App(param.Parameterized):
         pn.state.on_session_destroyed(self._stop)
 
     def _stop(self, session_context):
-        """A closed page stops its background measurements (before their next run)."""
+        """A closed page stops its background runs (the long run after its current chunk, the
+        measurements before their next run) and gives back the memory of its results."""
         for background in (self.long, self.measure, self.horizons):
             background.cancel()
+        for derived in (self.study, self.gauges, self.lesson):
+            derived.release()
 
     def _on_message(self, event):
         if event.new is not None:

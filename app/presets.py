@@ -1,4 +1,6 @@
-"""Presets: the paper's figures with their printed parameters, and the Kapitza pendulum.
+"""Presets: the paper's figures with their printed parameters, the Kapitza pendulum, and the
+hard cases (where the paper's gentle parameters are left behind; tests/test_hard_cases.py
+asserts what each shows).
 
 A preset is a set of app-state values; its link is the URL that opens the app in that state
 (the same query the app writes with `pn.state.location.sync`).
@@ -22,14 +24,21 @@ def long_horizon(scene):
     return LONG_HORIZONS.get(scene, 100.0 * SCENES[scene].T)
 
 
+PAPER, HARD = "Paper figures", "Hard cases"
+
+
 @dataclass(frozen=True)
 class Preset:
-    """name: the figure it reproduces; state: Study parameters; T_long: the long-run horizon."""
+    """name: the figure or case it opens; doc: what to see; state: Study parameters; T_long: the
+    long-run horizon; group: PAPER or HARD; fails: the methods whose live run stops early (with
+    its message) by design."""
 
     name: str
     doc: str
     state: dict = field(default_factory=dict)
     T_long: float = None
+    group: str = PAPER
+    fails: tuple = ()
 
     def query(self, url_names, long_names):
         """The URL query string (with '?') that opens the app in this preset's state."""
@@ -65,4 +74,60 @@ PRESETS = (
            "Start near the top (q0 = 3.0) with a fast-driven pivot (a = 0.1, nu = 40): it stays up.",
            {"scene": "kapitza", "method": "midpoint", "other": "rk4", "h": 0.002, "T": 20.0,
             "values": {"q0": 3.0, "a": 0.1, "nu": 40.0}, "view": "play"}),
+    Preset("RK4 just past its stability limit",
+           "The plain oscillator at h = 2.9 > 2√2: RK4's amplitude grows by |R(2.9i)| = 1.19 per step "
+           "(1e76 by T), implicit midpoint stays on its circle with 2 points per period.",
+           {"scene": "modulated", "method": "midpoint", "other": "rk4", "h": 2.9, "T": 2900.0,
+            "values": {"eps": 0.0}, "view": "compare"}, group=HARD),
+    Preset("Explicit Euler at a small step",
+           "Explicit Euler spirals out at every h, by √(1 + h²) per step (×148 here at h = 0.05); the "
+           "paper's symplectic Euler stays on a closed curve.",
+           {"scene": "modulated", "method": "symplectic-euler", "other": "euler", "h": 0.05, "T": 200.0,
+            "values": {"eps": 0.0}, "view": "compare"}, group=HARD),
+    Preset("Mathieu tongue: parametric resonance",
+           "Stiffness 1 + 0.2 sin(2t) is inside the principal tongue: the true solution grows like "
+           "e^{0.05 t}, and both methods grow at that rate (e^10 by T).",
+           {"scene": "modulated", "method": "midpoint", "other": "rk4", "h": 0.05, "T": 200.0,
+            "values": {"eps": 0.2, "alpha": 2.0}, "view": "compare"}, group=HARD),
+    Preset("Just outside the tongue",
+           "The same depth at alpha = 2.5 is stable: the solution beats but stays bounded, and neither "
+           "method reports growth.",
+           {"scene": "modulated", "method": "midpoint", "other": "rk4", "h": 0.05, "T": 200.0,
+            "values": {"eps": 0.2, "alpha": 2.5}, "view": "compare"}, group=HARD),
+    Preset("Stiff field, strong B",
+           "beta = 5 (1 + 10 sin 50t) reverses 16 times per unit time and gyrates at up to 110: at "
+           "h = 0.01 RK4's orbit departs and its H + p_t reaches 1e5; midpoint keeps the angular "
+           "momentum x p_y - y p_x exactly.",
+           {"scene": "charged", "method": "midpoint", "other": "rk4", "h": 0.01, "T": 20.0,
+            "values": {"B0": 5.0, "eps": 10.0, "w": 50.0}, "view": "compare"}, group=HARD),
+    Preset("Stiff field, weak B",
+           "beta = 0.05 (1 + 10 sin 50t): slow gyration driven by a fast induced E field; both methods "
+           "agree at h = 0.01.",
+           {"scene": "charged", "method": "midpoint", "other": "rk4", "h": 0.01, "T": 20.0,
+            "values": {"B0": 0.05, "eps": 10.0, "w": 50.0}, "view": "compare"}, group=HARD),
+    Preset("Damped across 600 decades",
+           "gamma T = 1400: e^{gamma t} reaches 1e608, q 1e304 and p 1e-304. Steps are taken in scaled "
+           "coordinates, so both runs reach T, and H + p_t stays bounded.",
+           {"scene": "damped", "method": "symplectic-euler", "other": "rk4", "h": 0.1, "T": 7000.0,
+            "values": {"gamma": 0.2}, "view": "compare"}, group=HARD),
+    Preset("Damped beyond floating point",
+           "At t = 7098 the true q passes 1.8e308: each run stops there with a message and shows its "
+           "data up to that step.",
+           {"scene": "damped", "method": "symplectic-euler", "other": "rk4", "h": 0.1, "T": 7500.0,
+            "values": {"gamma": 0.2}, "view": "compare"}, group=HARD, fails=("symplectic-euler", "rk4")),
+    Preset("Kapitza: Newton at a large step",
+           "h = 0.1 with the drive at nu = 40 (h nu = 4): Newton still converges to round-off every step, "
+           "and the pendulum stays up.",
+           {"scene": "kapitza", "method": "midpoint", "other": "rk4", "h": 0.1, "T": 20.0,
+            "values": {"q0": 3.0, "a": 0.1, "nu": 40.0}, "view": "compare"}, group=HARD),
+    Preset("Kapitza: Newton fails",
+           "a = 0.3 at h = 0.5: the midpoint equations have no nearby solution; the message names the "
+           "step and the data up to it stay.",
+           {"scene": "kapitza", "method": "midpoint", "other": "rk4", "h": 0.5, "T": 100.0,
+            "values": {"q0": 3.0, "a": 0.3, "nu": 40.0}, "view": "compare"}, group=HARD, fails=("midpoint",)),
+    Preset("Ten million steps",
+           "The modulated oscillator to T = 1e6 at h = 0.1, 1e7 steps per method in the Long run view "
+           "(about a minute): midpoint's H + p_t stays bounded, RK4's drifts.",
+           {"scene": "modulated", "method": "midpoint", "other": "rk4", "h": 0.1, "T": 50.0,
+            "values": {}, "view": "long"}, T_long=1e6, group=HARD),
 )

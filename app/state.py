@@ -15,6 +15,7 @@ says what to change, and the last good results stay.
 import asyncio
 import dataclasses
 import math
+import os
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -31,7 +32,7 @@ from cosymp.diagnostics import (
     tangent_maps,
 )
 from cosymp.errors import InputError, RunError
-from cosymp.integrate import Setup, check_step, simulate
+from cosymp.integrate import Setup, check_step, default_stride, simulate
 from cosymp.methods import METHODS
 from cosymp.report import render
 from cosymp.report.scene import command as report_command
@@ -56,6 +57,75 @@ SWEEP_THETAS = np.linspace(0.0, 1.0, 21)
 SWEEP_STEPS = 200
 LONG_BINS = 20_000
 LONG_CHUNK_SECONDS = 0.3
+
+
+# Memory: every computation leases its peak memory from one budget per server process before it
+# starts and holds it while its results are kept; a lease that would pass the cap is refused with
+# a message. Peaks were measured with tracemalloc (tests/test_load.py checks the bounds):
+# a comparison peaks at <= 39 bytes per value its runs record (damped 39, charged 31, kapitza
+# 28), a long run at 179 MB (chunked, any horizon), a work-precision measurement at 43 MB and
+# long horizons at 29 MB.
+MEMORY_CAP_MB = float(os.environ.get("COSYMP_MEMORY_CAP_MB", "4096"))
+BYTES_PER_RECORDED = 48
+LONG_RUN_BYTES = 256 << 20
+MEASURE_BYTES = 96 << 20
+
+
+class MemoryBudget:
+    """Bytes leased by the computations of all sessions, and the cap they may not pass."""
+
+    def __init__(self, cap_bytes):
+        self.cap = cap_bytes
+        self.used = 0
+        self._lock = threading.Lock()
+
+    def lease(self, nbytes, what):
+        """A Lease of nbytes, or InputError saying what to change when the cap would be passed."""
+        mb = 1 << 20
+        with self._lock:
+            if nbytes > self.cap:
+                raise InputError(f"{what} needs about {nbytes / mb:.0f} MB, more than this server's cap of "
+                                 f"{self.cap / mb:.0f} MB (COSYMP_MEMORY_CAP_MB): increase h or shorten T")
+            if self.used + nbytes > self.cap:
+                raise InputError(f"{what} needs about {nbytes / mb:.0f} MB and only "
+                                 f"{(self.cap - self.used) / mb:.0f} MB of this server's "
+                                 f"{self.cap / mb:.0f} MB are free while other runs hold the rest: "
+                                 "try again in a moment, or increase h or shorten T")
+            self.used += nbytes
+        return Lease(self, nbytes)
+
+    def _give_back(self, nbytes):
+        with self._lock:
+            self.used -= nbytes
+
+
+class Lease:
+    """Memory held from a MemoryBudget until released (releasing twice is harmless)."""
+
+    def __init__(self, budget, nbytes):
+        self._budget = budget
+        self.nbytes = nbytes
+
+    def release(self):
+        if self.nbytes:
+            self._budget._give_back(self.nbytes)
+            self.nbytes = 0
+
+
+BUDGET = MemoryBudget(int(MEMORY_CAP_MB * (1 << 20)))
+
+
+def comparison_bytes(setups, h, T):
+    """Peak memory of comparing the setups (study.compare: 2n + 2 members with increments, and
+    their tangent maps), from the values the runs record."""
+    steps = check_step(h, T)
+    total = 0
+    for s in setups:
+        m = 2 * s.scene.ndof
+        members = m + 2
+        records = steps // default_stride(steps, members, m, increments=True) + 1
+        total += records * members * (m + 1)
+    return BYTES_PER_RECORDED * total
 
 
 @dataclasses.dataclass(frozen=True)
@@ -170,16 +240,19 @@ def failure_note(runs):
 class Derived(param.Parameterized):
     """Coalesced recomputation. `_schedule()` asks for fresh data (computed off the event loop;
     requests made meanwhile merge into one), `refresh()` computes now. Subclasses give `_job()`
-    (the validated inputs, None for nothing to do, or InputError), `_compute(job)` (pure, run in a
-    thread), `_apply(result)` and `_say(note)`."""
+    (the validated inputs, None for nothing to do, or InputError), `_footprint(job)` (its peak
+    memory, leased from BUDGET before it runs and held while its result is kept), `_compute(job)`
+    (pure, run in a thread), `_apply(result)` and `_say(note)`."""
 
     busy = param.Boolean(default=False, doc="A computation is under way.")
+    WHAT = "this comparison"
 
     def __init__(self, **params):
         super().__init__(**params)
         self._wanted = 0
         self._done = 0
         self._draining = False
+        self._lease = None
 
     def _schedule(self):
         self._wanted += 1
@@ -191,35 +264,61 @@ class Derived(param.Parameterized):
         """Compute from the current inputs now, in this thread (no event loop needed)."""
         self._wanted += 1
         target = self._wanted
+        leased = self._lease_job()
+        if leased is not None:
+            job, lease = leased
+            self._keep(lease, self._run(job, lease))
+        self._done = max(self._done, target)
+
+    def _lease_job(self):
+        """(job, Lease of its memory), or None for nothing to do or bad input (said)."""
         try:
             job = self._job()
+            if job is None:
+                return None
+            return job, BUDGET.lease(self._footprint(job), self.WHAT)
         except InputError as err:
             self._say(Note("error", str(err)))
-            job = None
-        if job is not None:
-            self._apply(self._compute(job))
-        self._done = max(self._done, target)
+            return None
+
+    def _run(self, job, lease):
+        try:
+            return self._compute(job)
+        except BaseException:
+            lease.release()
+            raise
+
+    def _keep(self, lease, result):
+        """Show the result and hold its memory instead of the previous result's."""
+        previous, self._lease = self._lease, lease
+        if previous is not None:
+            previous.release()
+        self._apply(result)
+
+    def release(self):
+        """Give back the memory of the kept result (the page is gone)."""
+        if self._lease is not None:
+            self._lease.release()
 
     async def _drain(self):
         self.busy = True
         try:
             while self._done < self._wanted:
                 target = self._wanted
-                try:
-                    job = self._job()
-                except InputError as err:
-                    self._done = target
-                    self._say(Note("error", str(err)))
-                    continue
-                if job is None:
+                leased = self._lease_job()
+                if leased is None:
                     self._done = target
                     continue
-                result = await asyncio.to_thread(self._compute, job)
+                job, lease = leased
+                result = await asyncio.to_thread(self._run, job, lease)
                 self._done = target
-                self._apply(result)
+                self._keep(lease, result)
         finally:
             self._draining = False
             self.busy = False
+
+    def _footprint(self, job):
+        raise NotImplementedError
 
     def _say(self, note):
         raise NotImplementedError
@@ -355,6 +454,9 @@ class Study(Derived):
         self.check_horizon()
         return self.scene, setups, float(self.h), float(self.T)
 
+    def _footprint(self, job):
+        return comparison_bytes(*job[1:4])
+
     def _compute(self, job):
         scene, setups, h, T = job
         return run_pair(scene, setups, h, T)
@@ -396,6 +498,7 @@ class ThetaLesson(Follower):
     """The lifted theta-method against the naive one at the study's θ, on the study's scene,
     and a θ sweep of their one-step defects (max over the first SWEEP_STEPS steps)."""
 
+    WHAT = "the θ lesson"
     WATCHED = ("scene", "theta", "h", "T", "values", "view")
     results = param.ClassSelector(class_=Runs, doc="Lifted and naive runs at the study's θ.")
     sweep = param.Dict(default=None, allow_None=True,
@@ -416,6 +519,9 @@ class ThetaLesson(Follower):
         s.check_horizon()
         key = (s.scene, tuple(sorted(s.values.items())), float(s.h))
         return s.scene, setups, float(s.h), float(s.T), key
+
+    def _footprint(self, job):
+        return comparison_bytes(*job[1:4])
 
     def _compute(self, job):
         scene, setups, h, T, key = job
@@ -455,6 +561,7 @@ def theta_sweep(setups, h, T):
 class GaugeStudy(Follower):
     """The charged particle in all five gauges with the study's method, h, T and parameters."""
 
+    WHAT = "the gauge study"
     WATCHED = ("scene", "method", "theta", "h", "T", "values", "view")
     results = param.Dict(default=None, allow_None=True,
                          doc="{gauge: {'per-gauge': (t, q, p, Pi), 'transported': ...}}.")
@@ -473,6 +580,11 @@ class GaugeStudy(Follower):
         theta = theta_for(s.method, s.theta)
         Setup.make("charged", s.method, values, theta)
         return s.method, values, float(s.h), float(s.T), theta
+
+    def _footprint(self, job):
+        method, values, h, T, theta = job
+        # bounded above: six single-member runs and five transports use less than one comparison
+        return comparison_bytes([Setup.make("charged", method, values, theta)], h, T)
 
     def _compute(self, job):
         method, values, h, T, theta = job
@@ -555,17 +667,18 @@ class LongRun(param.Parameterized):
         try:
             setups = s.setups()
             steps = check_step(s.h, self.T_long)
+            lease = BUDGET.lease(LONG_RUN_BYTES, "a long run")
         except InputError as err:
             s.say(Note("error", str(err)))
             return
         self._cancel = False
         self.running = True
-        param.parameterized.async_executor(partial(self._run, setups, float(s.h), steps))
+        param.parameterized.async_executor(partial(self._run, setups, float(s.h), steps, lease))
 
     def cancel(self):
         self._cancel = True
 
-    async def _run(self, setups, h, steps):
+    async def _run(self, setups, h, steps, lease):
         s = self.study
         width = max(1, math.ceil(steps / LONG_BINS))
         cap = width * max(1, min(max_chunk(x) for x in setups) // width)
@@ -612,6 +725,7 @@ class LongRun(param.Parameterized):
             else:
                 self.status = f"done: {done} steps per method in {elapsed:.1f} s"
         finally:
+            lease.release()
             self.running = False
 
 
@@ -640,7 +754,8 @@ class Worker:
     callback records (done, total, label), and raises Cancelled once `cancelled` is set, which
     stops cosymp's measurements before their next run."""
 
-    def __init__(self, fn, *args):
+    def __init__(self, fn, *args, lease=None):
+        self.lease = lease
         self.cancelled = False
         self.latest = (0, 1, "starting")
         self.result = None
@@ -663,6 +778,8 @@ class Worker:
         finally:
             if self.result is None and self.error is None and not self.cancelled:
                 self.error = RuntimeError("the computation stopped without a result (see the server's log)")
+            if self.lease is not None:
+                self.lease.release()
             self.finished.set()
 
 
@@ -699,10 +816,11 @@ class Background(param.Parameterized):
             return
         try:
             job = self._job()
+            lease = BUDGET.lease(MEASURE_BYTES, "this measurement")
         except InputError as err:
             self.study.say(Note("error", f"{self.KIND}: {err}"))
             return
-        self._worker = Worker(self._compute, job)
+        self._worker = Worker(self._compute, job, lease=lease)
         self.param.update(running=True, progress=0.0, label="starting", status=f"running: {self._describe(job)}")
         param.parameterized.async_executor(partial(self._watch, self._worker, job))
 

@@ -26,7 +26,7 @@ from cosymp.methods import METHODS
 from cosymp.scenes import SCENES
 from cosymp.scenes.charged import GAUGES
 
-from .presets import PRESETS
+from .presets import HARD, PAPER, PRESETS
 from .state import (
     LONG_URL_NAMES,
     URL_NAMES,
@@ -754,12 +754,20 @@ class LongRunView(pn.viewable.Viewer):
 
 
 class PresetLinks(pn.viewable.Viewer):
-    """Links that open the app on each paper figure's parameters."""
+    """Links that open the app on each paper figure's parameters, and on the hard cases (each
+    with its sentence on what to see)."""
 
     def __panel__(self):
-        items = "".join(f"<li><a href='{html.escape(p.query(URL_NAMES, LONG_URL_NAMES))}' "
-                        f"title='{html.escape(p.doc)}'>{html.escape(p.name)}</a></li>" for p in PRESETS)
-        return note(f"<h4>Paper figures</h4><ul class='presets'>{items}</ul>")
+        groups = []
+        for group in (PAPER, HARD):
+            items = "".join(f"<li><a href='{html.escape(p.query(URL_NAMES, LONG_URL_NAMES))}' "
+                            f"title='{html.escape(p.doc)}'>{html.escape(p.name)}</a>"
+                            + (f"<br><small>{html.escape(p.doc)}</small>" if group == HARD else "") + "</li>"
+                            for p in PRESETS if p.group == group)
+            body = f"<ul class='presets'>{items}</ul>"
+            groups.append(f"<h4>{group}</h4>{body}" if group == PAPER else
+                          f"<details class='presets'><summary><b>{group}</b> (what each shows)</summary>{body}</details>")
+        return note("".join(groups))
 
 
 # ---------------------------------------------------------------- work against precision

@@ -29,6 +29,13 @@ def norm(v, axis=-1):
     return np.squeeze(np.where(ok, out, scale), axis=axis)
 
 
+def distance(a, b, axis=-1):
+    """norm(a - b) without overflow in the difference itself (a and b near 1e308, opposite signs)."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    with np.errstate(over="ignore"):  # a distance beyond 1.8e308 is inf, as it should be
+        return 2.0 * norm(0.5 * a - 0.5 * b, axis=axis)
+
+
 def omega(X, Y):
     """Canonical 2-form sum_i X_qi Y_pi - X_pi Y_qi over the last axis (q then p)."""
     n = X.shape[-1] // 2

@@ -11,9 +11,9 @@ import numpy as np
 
 from .diagnostics import (
     det_deviation,
+    distance,
     loop_action,
     nearby_states,
-    norm,
     paper_symplectic_form,
     paper_volume_form,
     ring_states,
@@ -90,7 +90,7 @@ def compare(setup, h, T, delta=1e-4, cloud_points=0, cloud_radius=0.05, stride=N
     if setup.scene.has_flow:
         exact = simulate(Setup.make(setup.scene, "exact", setup.values), h * run.stride,
                          run.steps * h, z0=base[None])
-        error = norm(run.z[:, 0] - exact.z[: len(run.t), 0])
+        error = distance(run.z[:, 0], exact.z[: len(run.t), 0])
     Pi = None
     if setup.scene.name == "charged":
         Pi = charged.mechanical(setup.P, run.t, run.q[:, 0], run.p[:, 0])

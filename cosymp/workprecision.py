@@ -29,7 +29,7 @@ from functools import partial
 
 import numpy as np
 
-from .diagnostics import det_deviation, norm, tangent_maps
+from .diagnostics import det_deviation, distance, norm, tangent_maps
 from .errors import InputError, RunError
 from .integrate import MAX_STEPS, Setup, check_step, get_scene, simulate
 from .kernels.families import Composition, Exact, Explicit, Gauss
@@ -115,7 +115,7 @@ def timed(call, budget):
 
 
 def _relative(z, z_ref):
-    err = float(norm(np.ravel(np.asarray(z) - np.asarray(z_ref))))
+    err = float(distance(np.ravel(z), np.ravel(z_ref)))
     return err / max(float(norm(np.ravel(z_ref))), np.finfo(float).tiny), err
 
 

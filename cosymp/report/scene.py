@@ -3,7 +3,7 @@ import shlex
 
 import numpy as np
 
-from ..diagnostics import norm
+from ..diagnostics import distance
 from ..reference import reference_final
 from ..study import compare_until_failure
 from . import Figure, Report, Section, Series, Table
@@ -45,7 +45,7 @@ def scene_report(setups, h, T, cmd, progress=None, computed=None):
         err = None
         if c is not None and c.error is None and not failure:
             z_ref, _ = reference_final(s, h, T)
-            err = float(norm(c.run.z[-1, 0] - z_ref[0]))
+            err = float(distance(c.run.z[-1, 0], z_ref[0]))
         runs.append((s, c, failure, err))
     report(total, total, "done")
     params = Table(["parameter", "value", "meaning"],
