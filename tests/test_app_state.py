@@ -301,3 +301,41 @@ def test_long_runs_and_measurements_give_their_memory_back(monkeypatch):
     assert lr.status.startswith("done") and budget.used == held
     s.release()
     assert budget.used == 0
+
+
+def test_a_cancelled_long_run_frees_its_chunks_and_its_lease(monkeypatch):
+    """The paper's 5e6-step run cancelled at a third, twice (the second is measured: the first
+    loads compiled code for good): the lease is given back, and what stays on the heap is the
+    shown envelopes (at most LONG_BINS bins per method), not the chunks' records (tracemalloc:
+    the peak is the chunks, the rest is freed)."""
+    import gc
+    import tracemalloc
+
+    budget = state.MemoryBudget(cap_bytes=1 << 30)
+    monkeypatch.setattr(state, "BUDGET", budget)
+    s = Study(values={"gamma": 2e-4})
+    held = budget.used
+    tracemalloc.start()
+    for _ in range(2):
+        lr = LongRun(study=s, T_long=5e5)
+        seen = []
+
+        def cancel(event, lr=lr, seen=seen):
+            if event.new > 0.3 and not seen:
+                seen.append(budget.used - held)
+                lr.cancel()
+
+        lr.param.watch(cancel, "progress")
+        before = tracemalloc.get_traced_memory()[0]
+        tracemalloc.reset_peak()
+        lr.start()
+        peak = tracemalloc.get_traced_memory()[1]
+        gc.collect()  # the last chunk's records sit in a reference cycle until the collector runs
+        current = tracemalloc.get_traced_memory()[0]
+        assert lr.status.startswith("cancelled") and seen == [state.LONG_RUN_BYTES] and budget.used == held
+    tracemalloc.stop()
+    kept = current - before
+    envelopes = sum(v.nbytes for d in lr.data.values() for v in d.values() if isinstance(v, np.ndarray))
+    print(f"cancelled long run: peak heap +{(peak - before) / 1e6:.1f} MB, kept +{kept / 1e6:.2f} MB "
+          f"(envelopes {envelopes / 1e6:.2f} MB)")
+    assert peak - before > 20 * kept and kept < 2 * envelopes + (1 << 20)
