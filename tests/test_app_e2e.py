@@ -191,7 +191,7 @@ def test_a_preset_link_opens_its_figure(page):
     from app.presets import PRESETS
     from app.state import LONG_URL_NAMES, URL_NAMES
 
-    kapitza = PRESETS[-1]
+    kapitza = next(p for p in PRESETS if p.name.startswith("Kapitza: stabilized"))
     page.open(kapitza.query(URL_NAMES, LONG_URL_NAMES))
     assert "Kapitza" in page.page.locator("h2").first.inner_text()
     assert page.page.locator(".bk-tab.bk-active").inner_text() == "Play"
@@ -206,6 +206,12 @@ def test_a_preset_link_opens_its_figure(page):
     page.page.get_by_text("The paper's chi does not give the Lorenz condition").first.wait_for()
     page.page.wait_for_timeout(1500)
     page.shot("05-gauge-preset")
+    damped = next(p for p in PRESETS if p.name == "Damped beyond floating point")
+    page.open(damped.query(URL_NAMES, LONG_URL_NAMES))
+    page.page.locator("details.presets summary").click()
+    expect(page.page.get_by_text("each run stops there with a message")).to_be_visible()
+    expect(page.page.locator(".notyf__message").first).to_contain_text("left floating-point range")
+    page.shot("05b-hard-case-overflow")
     page.check()
 
 
