@@ -10,11 +10,12 @@ import os
 import shlex
 import sys
 
-from .errors import CosympError, InputError, RunError
+from .errors import CosympError, InputError, RunError, one_line
 
 
 class _Parser(argparse.ArgumentParser):
     def error(self, message):
+        message = one_line(message, 300)
         raise InputError(f"{message} (see 'cosymp {self.prog.split()[-1]} --help')"
                          if " " in self.prog else f"{message} (see 'cosymp --help')")
 

@@ -1,4 +1,34 @@
 """Errors with messages a user can act on."""
+import math
+import numbers
+
+QUOTE_LIMIT = 60
+
+
+def one_line(text, limit):
+    """text on one line (control characters escaped), cut to `limit` characters with its length said."""
+    text = str(text)
+    shown = "".join(c if c.isprintable() else repr(c)[1:-1] for c in text[:limit])
+    return shown + (f"... ({len(text)} characters)" if len(text) > limit else "")
+
+
+def quoted(value, limit=QUOTE_LIMIT):
+    """User text as a message shows it: quoted, on one line, cut to `limit` characters."""
+    text = str(value)
+    return f"'{one_line(text[:limit], limit)}'" + (f"... ({len(text)} characters)" if len(text) > limit else "")
+
+
+def as_number(value, label):
+    """A finite float from a number (Python's or NumPy's, not bool), or InputError naming label."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise InputError(f"{label} = {quoted(value)} is not a number: pass a finite {label}")
+    try:
+        x = float(value)
+    except OverflowError:
+        raise InputError(f"{label} is too large for a double: pass a finite {label}") from None
+    if not math.isfinite(x):
+        raise InputError(f"{label} = {x} is not a finite number: pass a finite {label}")
+    return x
 
 
 class CosympError(Exception):

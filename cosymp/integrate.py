@@ -5,7 +5,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import InputError, RunError
+from .errors import InputError, RunError, as_number, quoted
 from .kernels.families import NEWTON, OK, OVERFLOW, SINGULAR
 from .kernels.loops import energies, propagate
 from .methods import method as get_method
@@ -17,25 +17,23 @@ MAX_RECORDED = 20_000_000
 
 def get_scene(name):
     if name not in SCENES:
-        raise InputError(f"unknown scene '{name}': choose one of {', '.join(SCENES)}")
+        raise InputError(f"unknown scene {quoted(name)}: choose one of {', '.join(SCENES)}")
     return SCENES[name]
 
 
 def check_step(h, T):
     """Number of steps for step h up to horizon T (T/h rounded up, within 1e-9 relative, so that
     h = T/N gives N), or InputError saying what to change."""
-    for label, x in (("h", h), ("T", T)):
-        if not isinstance(x, (int, float)) or not math.isfinite(x):
-            raise InputError(f"{label} = {x} is not a finite number: pass a finite {label}")
+    h, T = as_number(h, "h"), as_number(T, "T")
     if h <= 0:
         raise InputError(f"h = {h} must be positive: pass a step size h > 0")
     if T <= 0:
         raise InputError(f"T = {T} must be positive: pass a horizon T > 0")
     ratio = T / h
-    steps = math.ceil(ratio - 1e-9 * max(1.0, ratio))
-    if steps > MAX_STEPS:
-        raise InputError(f"T/h = {T / h:.3g} steps exceeds the cap of {MAX_STEPS:.0e}: "
+    if not ratio <= MAX_STEPS:  # also a ratio that overflows to inf
+        raise InputError(f"T/h = {ratio:.3g} steps exceeds the cap of {MAX_STEPS:.0e}: "
                          f"increase h or shorten T")
+    steps = math.ceil(ratio - 1e-9 * max(1.0, ratio))
     return max(steps, 1)
 
 
@@ -158,6 +156,9 @@ def simulate(setup, h, T, z0=None, stride=None, increments=False, t0=0.0, pt0=No
     PT = np.empty(N)
     H0 = np.empty((1, N))
     energies(setup.P, np.array([float(t0)]), Z[None], H0)
+    if pt0 is None and not np.all(np.isfinite(H0)):
+        raise InputError(f"H at the start (t = {t0:g}) is not finite: the scene's coefficients or the "
+                         f"initial state overflow there; change the parameters (beta(t), B0, ...) or q0, p0")
     PT[:] = -H0[0] if pt0 is None else pt0
     Trec = np.empty(K)
     Zrec = np.empty((K, N, m))

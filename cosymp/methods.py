@@ -9,7 +9,7 @@ from functools import cache
 
 import numpy as np
 
-from .errors import InputError
+from .errors import InputError, as_number, quoted
 from .kernels.families import Boris, Composition, Exact, Explicit, Gauss, Theta
 from .kernels.stack import MAX_OFFSETS, MAX_STAGES
 
@@ -76,6 +76,17 @@ def _gauss6():
     return Gauss(_floats(A), _floats([5 / 18, 4 / 9, 5 / 18]), _floats([0.5 - r / 10, 0.5, 0.5 + r / 10]))
 
 
+
+def _theta(value):
+    """theta as a float: numbers and numeric text are taken, anything else is refused."""
+    if isinstance(value, str):
+        try:
+            value = float(value)
+        except ValueError:
+            raise InputError(f"theta = {quoted(value)} is not a number: pass --theta between 0 and 1") from None
+    return as_number(value, "theta")
+
+
 @dataclass(frozen=True)
 class Method:
     """A named method. `build(theta)` gives the family data the kernels run."""
@@ -115,8 +126,8 @@ class Method:
 
     def data(self, theta=None):
         if self.takes_theta:
-            theta = 0.5 if theta is None else theta
-            if not (isinstance(theta, (int, float)) and 0.0 <= theta <= 1.0):
+            theta = 0.5 if theta is None else _theta(theta)
+            if not 0.0 <= theta <= 1.0:
                 raise InputError(f"theta = {theta} is outside [0, 1]: pass --theta between 0 and 1")
             return _data(self.name, float(theta))
         if theta is not None:
@@ -177,5 +188,5 @@ METHODS = {m.name: m for m in (
 
 def method(name):
     if name not in METHODS:
-        raise InputError(f"unknown method '{name}': choose one of {', '.join(METHODS)}")
+        raise InputError(f"unknown method {quoted(name)}: choose one of {', '.join(METHODS)}")
     return METHODS[name]

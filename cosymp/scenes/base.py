@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
-from ..errors import InputError
+from ..errors import InputError, quoted
 from ..kernels.dispatch import INLINE
 
 
@@ -31,15 +31,15 @@ class Param:
         """The value as the scene stores it, or InputError saying what to change."""
         if self.choices:
             if value not in self.choices:
-                raise InputError(f"unknown {self.name} '{value}': choose one of {', '.join(self.choices)}")
+                raise InputError(f"unknown {self.name} {quoted(value)}: choose one of {', '.join(self.choices)}")
             return value
         try:
             x = float(value)
-        except (TypeError, ValueError):
-            raise InputError(f"{self.name} must be a number, got '{value}'") from None
+        except (TypeError, ValueError, OverflowError):
+            raise InputError(f"{self.name} must be a number, got {quoted(value)}") from None
         lo, hi = self.bounds
         if not math.isfinite(x) or not lo <= x <= hi:
-            raise InputError(f"{self.name} = {value} is outside [{lo:g}, {hi:g}]: {self.doc}")
+            raise InputError(f"{self.name} = {quoted(value)} is outside [{lo:g}, {hi:g}]: {self.doc}")
         return x
 
 
@@ -110,7 +110,7 @@ class Scene:
         vals = {p.name: p.default for p in self.params}
         for name, value in (overrides or {}).items():
             if name not in known:
-                raise InputError(f"scene '{self.name}' has no parameter '{name}': "
+                raise InputError(f"scene '{self.name}' has no parameter {quoted(name)}: "
                                  f"use one of {', '.join(known)}")
             vals[name] = known[name].check(value)
         return vals

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ..errors import InputError
+from ..errors import InputError, quoted
 from ..expr import ExprError, evaluate, parse, programs, zero_programs
 from ..kernels.dispatch import INLINE, JIT
 from . import quadratic
@@ -133,7 +133,7 @@ class BetaParam(Param):
         try:
             parse(text)
         except ExprError as err:
-            raise InputError(f"beta(t) = '{text}': {err}") from None
+            raise InputError(f"beta(t) = {quoted(text)}: {err}") from None
         return text
 
 
