@@ -25,7 +25,7 @@ ARTIFACTS = ROOT / "tests" / "artifacts"
 CHROMIUM = os.environ.get("COSYMP_CHROMIUM", "/usr/bin/chromium")
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
                  "--disable-background-networking", "--disable-component-update", "--disable-sync"]
-START_TIMEOUT_S = 300
+START_TIMEOUT_S = 600  # a cold numba cache compiles every kernel first (1-3 min quiet, more under load)
 WAIT_MS = 20_000
 
 pytestmark = [
