@@ -61,7 +61,7 @@ LONG_CHUNK_SECONDS = 0.3
 
 # Memory: every computation leases its peak memory from one budget per server process before it
 # starts and holds it while its results are kept; a lease that would pass the cap is refused with
-# a message. Peaks were measured with tracemalloc (tests/test_load.py checks the bounds):
+# a message. Peaks were measured with tracemalloc (tests/test_app_state.py checks the comparison bound):
 # a comparison peaks at <= 39 bytes per value its runs record (damped 39, charged 31, kapitza
 # 28), a long run at 179 MB (chunked, any horizon), a work-precision measurement at 43 MB and
 # long horizons at 29 MB.
