@@ -170,10 +170,23 @@ INLINE void flow(const Params *P, double t0, double t1, double *z)
         S = s;
     }
     double q = z[0], p = z[1];
-    double grow = exp(P->gamma * t0);
+    double root = exp(0.5 * P->gamma * t0);
     double half = exp(0.5 * P->gamma * s);
-    z[0] = half * (q * C + (grow * p / P->m - 0.5 * P->gamma * q) * S);
-    z[1] = (p * C + (0.5 * P->gamma * p - P->m * P->w0 * q / grow) * S) / half;
+    z[0] = half * (q * C + (root * (root * p) / P->m - 0.5 * P->gamma * q) * S);
+    z[1] = (p * C + (0.5 * P->gamma * p - P->m * P->w0 * (q / root) / root) * S) / half;
+}
+
+/* damped.scaling: E = 2^e nearest to e^{gamma t/2} (rint: half to even, as numpy's rint) */
+#define HAS_SCALING
+INLINE long scaling(const Params *P, double t, double *tau)
+{
+    if (P->gamma == 0.0) {
+        *tau = 0.0;
+        return 0;
+    }
+    long e = (long)rint(P->gamma * t * (0.5 / M_LN2));
+    *tau = (double)e * (2.0 * M_LN2) / P->gamma;
+    return e;
 }
 
 #elif SCENE == MODULATED
@@ -242,6 +255,27 @@ INLINE double bfield(const Params *P, const double *c)
 }
 
 #endif
+
+#ifndef HAS_SCALING
+/* scenes.base.unscaled */
+INLINE long scaling(const Params *P, double t, double *tau)
+{
+    (void)P;
+    (void)t;
+    *tau = 0.0;
+    return 0;
+}
+#endif
+
+/* loops._rescale: q <- q qf, p <- p pf unless e = 0 (qf, pf = 2^e, 2^-e or the reverse) */
+INLINE void rescale(double *z, long e, double qf, double pf)
+{
+    if (e != 0)
+        for (int i = 0; i < NDOF; i++) {
+            z[i] *= qf;
+            z[NDOF + i] *= pf;
+        }
+}
 
 /* ---- linalg.solve: the leading n x n block of A (row stride n) against B (n x k, row stride
    k; k = 1 is a vector); partial pivoting, A destroyed ---- */
@@ -833,17 +867,19 @@ typedef struct {
     long done;
 } Loop;
 
-INLINE void coefs(const Params *P, const Family *D, double tk, double tk1, double h, double *C,
-                         int reuse)
+INLINE long coefs(const Params *P, const Family *D, double tk, double tk1, double h, double *C,
+                  int reuse, long prev, double *tau)
 {
+    long e = scaling(P, tk, tau);
     int u = D->u;
     for (int j = 0; j < u; j++) {
-        if (j == 0 && reuse)
+        if (j == 0 && reuse && e == prev)
             for (int c = 0; c < NCOEF; c++)
                 C[c] = C[(u - 1) * NCOEF + c];
         else
-            coef(P, D->offsets[j] == 1.0 ? tk1 : tk + D->offsets[j] * h, C + j * NCOEF);
+            coef(P, (D->offsets[j] == 1.0 ? tk1 : tk + D->offsets[j] * h) - *tau, C + j * NCOEF);
     }
+    return e;
 }
 
 /* _accept: check the member's new state, store it, record it */
@@ -878,7 +914,7 @@ INLINE int propagate(int family, const Family *D, const Work *W,
     Loop L = *Lp;
     double t0 = L.t0, h = L.h;
     long ld = L.m;
-    double C[D->u * NCOEF], z[M], old[M];
+    double C[D->u * NCOEF], z[M], old[M], zs[M];
     int can_reuse = D->u > 1 && D->offsets[0] == 0.0 && D->offsets[D->u - 1] == 1.0;
 #if LINEAR
     double Mm[M * M], Q[M * M];
@@ -892,10 +928,17 @@ INLINE int propagate(int family, const Family *D, const Work *W,
                 L.dZrec[i * ld + r] = NAN;
         }
     }
-    long rec = 1;
+    long rec = 1, prev = 0;
+    double up = 1.0, down = 1.0;
     for (long k = 0; k < L.nsteps; k++) {
-        double tk = t0 + k * h;
-        coefs(P, D, tk, t0 + (k + 1) * h, h, C, can_reuse && k > 0);
+        double tau;
+        long e = coefs(P, D, t0 + k * h, t0 + (k + 1) * h, h, C, can_reuse && k > 0, prev, &tau);
+        if (e != prev) {
+            up = ldexp(1.0, (int)e);
+            down = ldexp(1.0, (int)-e);
+            prev = e;
+        }
+        double tk = t0 + k * h - tau;
 #if LINEAR
         double s = lmatrix(family, D, W, P, C, tk, h, Mm, Q);
 #endif
@@ -903,17 +946,21 @@ INLINE int propagate(int family, const Family *D, const Work *W,
         for (long i = 0; i < L.N; i++) {
 #if LINEAR
             double quad = 0.0;
-            for (int r = 0; r < M; r++)
+            for (int r = 0; r < M; r++) {
                 old[r] = L.Z[i * ld + r];
+                zs[r] = old[r];
+            }
+            rescale(zs, e, down, up);
             for (int r = 0; r < M; r++) {
                 double acc = 0.0, qr = 0.0;
                 for (int c = 0; c < M; c++) {
-                    acc += Mm[r * M + c] * old[c];
-                    qr += Q[r * M + c] * old[c];
+                    acc += Mm[r * M + c] * zs[c];
+                    qr += Q[r * M + c] * zs[c];
                 }
                 z[r] = acc;
-                quad += old[r] * qr;
+                quad += zs[r] * qr;
             }
+            rescale(z, e, up, down);
             int status = accept(OK, i, z, old, L.PT[i] - (0.5 * quad + s), &L, rec, recording);
 #else
             for (int r = 0; r < M; r++) {
@@ -921,7 +968,9 @@ INLINE int propagate(int family, const Family *D, const Work *W,
                 z[r] = old[r];
             }
             double pt = L.PT[i];
+            rescale(z, e, down, up);
             int status = step(family, D, W, C, h, z, &pt);
+            rescale(z, e, up, down);
             status = accept(status, i, z, old, pt, &L, rec, recording);
 #endif
             if (status != OK) {

@@ -5,17 +5,17 @@ import numbers
 QUOTE_LIMIT = 60
 
 
-def one_line(text, limit):
-    """text on one line (control characters escaped), cut to `limit` characters with its length said."""
+def one_line(text, limit, quote=""):
+    """text on one line (control characters escaped), between `quote`s, cut to `limit` characters
+    with its length said."""
     text = str(text)
     shown = "".join(c if c.isprintable() else repr(c)[1:-1] for c in text[:limit])
-    return shown + (f"... ({len(text)} characters)" if len(text) > limit else "")
+    return quote + shown + quote + (f"... ({len(text)} characters)" if len(text) > limit else "")
 
 
 def quoted(value, limit=QUOTE_LIMIT):
     """User text as a message shows it: quoted, on one line, cut to `limit` characters."""
-    text = str(value)
-    return f"'{one_line(text[:limit], limit)}'" + (f"... ({len(text)} characters)" if len(text) > limit else "")
+    return one_line(value, limit, quote="'")
 
 
 def as_number(value, label):

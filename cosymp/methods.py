@@ -76,7 +76,6 @@ def _gauss6():
     return Gauss(_floats(A), _floats([5 / 18, 4 / 9, 5 / 18]), _floats([0.5 - r / 10, 0.5, 0.5 + r / 10]))
 
 
-
 def _theta(value):
     """theta as a float: numbers and numeric text are taken, anything else is refused."""
     if isinstance(value, str):

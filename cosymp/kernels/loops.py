@@ -18,24 +18,35 @@ COMPLEX_STEP = 1e-50
 
 
 @njit(**INLINE)
-def _coefs(P, offsets, tk, tk1, h, C, reuse):
-    """Time coefficients at the step's offsets; the end of the last step is the start of this."""
+def _coefs(P, offsets, tk, tk1, h, C, reuse, prev):
+    """Time coefficients at the offsets of the step from tk to tk1, read at the scene's shifted
+    time; returns the step's scaling (e, tau). With `reuse`, the end of the last step (scaling
+    exponent `prev`) is the start of this one when the scaling did not change."""
+    e, tau = scaling(P, tk)
     u = len(offsets)
     for j in range(u):
-        if j == 0 and reuse:
+        if j == 0 and reuse and e == prev:
             for c in range(ncoef(P)):
                 C[0, c] = C[u - 1, c]
         else:
-            coef(P, tk1 if offsets[j] == 1.0 else tk + offsets[j] * h, C, j)
+            coef(P, (tk1 if offsets[j] == 1.0 else tk + offsets[j] * h) - tau, C, j)
+    return e, tau
 
 
 @njit(**INLINE)
-def _rescale(z, n, e):
-    """q <- q 2^e, p <- p 2^-e in place (exact; e = 0 leaves z alone)."""
+def _factors(e):
+    """(2^e, 2^-e): exact powers of two (0 or inf only where |e| passes the exponent range, at
+    the end of the state's own range)."""
+    return math.ldexp(1.0, e), math.ldexp(1.0, -e)
+
+
+@njit(**INLINE)
+def _rescale(z, n, e, qf, pf):
+    """q <- q qf, p <- p pf in place, unless e = 0 (qf, pf powers of two: exact)."""
     if e != 0:
         for i in range(n):
-            z[i] = math.ldexp(z[i], e)
-            z[n + i] = math.ldexp(z[n + i], -e)
+            z[i] *= qf
+            z[n + i] *= pf
 
 
 @njit(**INLINE)
@@ -93,11 +104,13 @@ def propagate_matrix(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZre
     _record_start(t0, Z, PT, Trec, Zrec, PTrec, dZrec, m)
     rec = 1
     prev = 0
+    up = down = 1.0
     for k in range(nsteps):
-        e, tau = scaling(P, t0 + k * h)
+        e, tau = _coefs(P, D.offsets, t0 + k * h, t0 + (k + 1) * h, h, C, can_reuse and k > 0, prev)
+        if e != prev:
+            up, down = _factors(e)
+            prev = e
         tk = t0 + k * h - tau
-        _coefs(P, D.offsets, tk, t0 + (k + 1) * h - tau, h, C, can_reuse and k > 0 and e == prev)
-        prev = e
         s = lmatrix(D, P, C, tk, h, M, Q, LW)
         recording = (k + 1) % stride == 0
         for i in range(Z.shape[0]):
@@ -105,7 +118,7 @@ def propagate_matrix(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZre
             for r in range(m):
                 old[r] = Z[i, r]
                 zs[r] = old[r]
-            _rescale(zs, m // 2, -e)
+            _rescale(zs, m // 2, e, down, up)
             for r in range(m):
                 acc = 0.0
                 qr = 0.0
@@ -114,7 +127,7 @@ def propagate_matrix(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZre
                     qr += Q[r, c] * zs[c]
                 z[r] = acc
                 quad += zs[r] * qr
-            _rescale(z, m // 2, e)
+            _rescale(z, m // 2, e, up, down)
             status = _accept(OK, i, z, old, PT[i] - (0.5 * quad + s), Z, PT, rec, recording, Zrec, PTrec,
                              dZrec, m)
             if status != OK:
@@ -140,19 +153,21 @@ def propagate_members(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZr
     _record_start(t0, Z, PT, Trec, Zrec, PTrec, dZrec, m)
     rec = 1
     prev = 0
+    up = down = 1.0
     for k in range(nsteps):
-        e, tau = scaling(P, t0 + k * h)
+        e, tau = _coefs(P, D.offsets, t0 + k * h, t0 + (k + 1) * h, h, C, can_reuse and k > 0, prev)
+        if e != prev:
+            up, down = _factors(e)
+            prev = e
         tk = t0 + k * h - tau
-        _coefs(P, D.offsets, tk, t0 + (k + 1) * h - tau, h, C, can_reuse and k > 0 and e == prev)
-        prev = e
         recording = (k + 1) % stride == 0
         for i in range(Z.shape[0]):
             for r in range(m):
                 old[r] = Z[i, r]
                 z[r] = old[r]
-            _rescale(z, m // 2, -e)
+            _rescale(z, m // 2, e, down, up)
             status, pt = step(D, P, C, tk, h, z, PT[i], W)
-            _rescale(z, m // 2, e)
+            _rescale(z, m // 2, e, up, down)
             status = _accept(status, i, z, old, pt, Z, PT, rec, recording, Zrec, PTrec, dZrec, m)
             if status != OK:
                 return status, k
@@ -172,8 +187,7 @@ def tangent_matrix(D, P, h, T, Z, PT, M):
     LW = lwork(D, P)
     Q = matrices(P, 1, 0.0)[0]
     for k in range(T.shape[0]):
-        tau = scaling(P, T[k])[1]
-        _coefs(P, D.offsets, T[k] - tau, T[k] + h - tau, h, C, False)
+        tau = _coefs(P, D.offsets, T[k], T[k] + h, h, C, False, 0)[1]
         lmatrix(D, P, C, T[k] - tau, h, M[k], Q, LW)
     return OK, T.shape[0]
 
@@ -190,11 +204,11 @@ def tangent_complex(D, P, h, T, Z, PT, M):
     m = 2 * ndof(P)
     zs = vectors(P, 1, 0.0)[0]
     for k in range(Z.shape[0]):
-        e, tau = scaling(P, T[k])
-        _coefs(P, D.offsets, T[k] - tau, T[k] + h - tau, h, C, False)
+        e, tau = _coefs(P, D.offsets, T[k], T[k] + h, h, C, False, 0)
         for r in range(m):
             zs[r] = Z[k, r]
-        _rescale(zs, m // 2, -e)
+        up, down = _factors(e)
+        _rescale(zs, m // 2, e, down, up)
         for j in range(m):
             for r in range(m):
                 zc[r] = zs[r]
@@ -226,10 +240,11 @@ def energies(P, T, Z, out):
     zs = np.empty(Z.shape[2])
     for k in range(T.shape[0]):
         e, tau = scaling(P, T[k])
+        up, down = _factors(e)
         coef(P, T[k] - tau, C, 0)
         for i in range(Z.shape[1]):
             zs[:] = Z[k, i]
-            _rescale(zs, Z.shape[2] // 2, -e)
+            _rescale(zs, Z.shape[2] // 2, e, down, up)
             out[k, i] = energy(P, C, 0, zs)
 
 
@@ -241,10 +256,11 @@ def vector_field(P, t, z, out):
     e, tau = scaling(P, t)
     coef(P, t - tau, C, 0)
     zs = z.copy()
-    _rescale(zs, n, -e)
+    up, down = _factors(e)
+    _rescale(zs, n, e, down, up)
     g = np.empty(2 * n)
     grad(P, C, 0, zs, g)
     for i in range(n):
-        out[i] = math.ldexp(g[n + i], e)
-        out[n + i] = -math.ldexp(g[i], -e)
+        out[i] = g[n + i] * up
+        out[n + i] = -g[i] * down
     out[2 * n] = -dhdt(P, C, 0, zs)

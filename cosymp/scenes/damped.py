@@ -10,6 +10,7 @@ from . import quadratic
 from .base import Param, Scene, SceneKernel
 
 DampedParams = namedtuple("DampedParams", "m w0 gamma")
+LN2 = math.log(2.0)
 
 
 @njit(**INLINE)
@@ -31,8 +32,8 @@ def scaling(P, t):
     E = 2^e nearest to e^{gamma t/2}, so the coefficients e^{+-gamma t} stay near 1 at any t."""
     if P.gamma == 0.0:
         return 0, 0.0
-    e = round(P.gamma * t / (2.0 * math.log(2.0)))
-    return e, 2.0 * e * math.log(2.0) / P.gamma
+    e = int(np.rint(P.gamma * t * (0.5 / LN2)))
+    return e, e * (2.0 * LN2) / P.gamma
 
 
 @njit(**INLINE)
