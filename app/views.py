@@ -511,9 +511,33 @@ def scene_widgets(inputs):
             w = pn.widgets.TextInput.from_param(p, name=label, description=p.doc, sizing_mode="stretch_width",
                                                 placeholder="e.g. 0.05*(1 + tanh(t)), then Enter")
         else:
-            w = pn.widgets.EditableFloatSlider.from_param(p, format="0.[00000]", sizing_mode="stretch_width")
+            w = number_control(inputs, name)
         widgets.append(w)
     return pn.Column(*widgets, sizing_mode="stretch_width", margin=0)
+
+
+def number_control(inputs, name):
+    """A slider over the parameter's soft range and a box that takes any value within its bounds;
+    the slider widens to a typed value outside its range.
+
+    Not Panel's EditableFloatSlider: in Panel 1.9 its JavaScript callback sits in a global
+    registry whose entry refers back to the widget, so every one stays alive, and with it the
+    inputs it shows, the Study watching them and the closed session's results."""
+    p = inputs.param[name]
+    lo, hi = p.softbounds
+    value = getattr(inputs, name)
+    slider = pn.widgets.FloatSlider(label=p.label, start=min(lo, value), end=max(hi, value), step=p.step,
+                                    value=value, format="0.[00000]", sizing_mode="stretch_width")
+    box = pn.widgets.FloatInput.from_param(p, name="", format="0.[00000]", width=100, align="end",
+                                           description=p.doc)
+
+    def show(event):
+        slider.param.update(start=min(slider.start, event.new), end=max(slider.end, event.new),
+                            value=event.new)
+
+    inputs.param.watch(show, name)
+    slider.param.watch(lambda e: setattr(inputs, name, e.new), "value")
+    return pn.Row(slider, box, name=name, sizing_mode="stretch_width", margin=0)
 
 
 class SceneInfo(pn.viewable.Viewer):

@@ -1,7 +1,9 @@
 """The app's state objects and element builders, without a server or a browser."""
+import gc
 import json
 import pathlib
 import re
+import weakref
 from urllib.parse import parse_qsl, urlsplit
 
 import holoviews as hv
@@ -60,6 +62,30 @@ def test_switching_scenes_rebuilds_the_controls():
     assert len(labels) == len(names) and labels[5].startswith("beta(t)") and labels[6] == "gauge"
     assert s.results.scene == "charged" and s.shown == "charged/sparse"
     assert len(views.phase_axes("charged")) == 3
+
+
+def test_a_number_control_follows_its_parameter_both_ways_and_widens_to_typed_values():
+    s = Study()
+    slider, box = views.scene_widgets(s.inputs)[2]
+    assert slider.label == "gamma" and (slider.start, slider.end) == s.inputs.param.gamma.softbounds
+    slider.value = 0.5
+    assert s.inputs.gamma == 0.5 and box.value == 0.5
+    box.value = 7.5
+    assert s.inputs.gamma == 7.5 and (slider.value, slider.end) == (7.5, 7.5)
+    s.inputs.gamma = -4.0
+    assert (slider.value, slider.start, box.value) == (-4.0, -4.0, -4.0)
+
+
+def test_discarded_controls_do_not_keep_the_study_alive():
+    """Panel 1.9's EditableFloatSlider stays in a global registry for ever, and kept every closed
+    session's Study (and its results) with it; the controls now used are collected."""
+    s = Study(scene="modulated")
+    study = weakref.ref(s)
+    controls = views.scene_widgets(s.inputs)
+    assert len(controls) == len(SCENES["modulated"].params)
+    s = controls = None
+    gc.collect()
+    assert study() is None
 
 
 def test_a_scene_without_the_method_falls_back_and_says_so():
