@@ -81,6 +81,23 @@ def parser():
     rp.add_argument("--quick", action="store_true", help="paper: leave out the long runs (5e5 and 2e5)")
     rp.add_argument("--no-work-precision", action="store_true", help="paper: leave out the work-precision diagram")
     rp.add_argument("-o", "--out", required=True, metavar="FILE.html")
+    sw = sub.add_parser("sweep", help="a measure of one method over a grid of parameters (a stability map), "
+                        "in-process or on a Dask cluster")
+    sw.add_argument("scene")
+    sw.add_argument("--method", default="midpoint")
+    sw.add_argument("--vary", action="append", default=[], metavar="NAME=START:STOP:NUM[:log]",
+                    help="a varied scene parameter, h, T or theta, e.g. --vary eps=0:0.6:50 (repeat for a grid)")
+    sw.add_argument("--measure", nargs="+", default=["growth"], metavar="MEASURE",
+                    help="one or more of H_ext_max_abs, det_max_dev, error_final, growth (default growth)")
+    sw.add_argument("--h", type=_number, help="step size where h is not varied (default: the scene's)")
+    sw.add_argument("--T", type=_number, help="horizon where T is not varied (default: the scene's)")
+    sw.add_argument("--theta", type=_number, help="theta for theta and theta-naive")
+    sw.add_argument("--set", type=_assignment, action="append", default=[], metavar="NAME=VALUE",
+                    help="a fixed scene parameter, e.g. --set q0=3.14159")
+    where = sw.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, help="start a Dask LocalCluster of N worker processes")
+    where.add_argument("--scheduler", metavar="ADDRESS", help="use a running Dask cluster, e.g. tcp://10.0.0.5:8786")
+    sw.add_argument("-o", "--out", required=True, metavar="FILE.csv|FILE.parquet")
     sub.add_parser("scenes", help="list the scenes with their parameters and defaults")
     sub.add_parser("methods", help="list the methods")
     b = sub.add_parser("bench", help="ns/step per scene and method against a C -O3 loop")
@@ -162,6 +179,24 @@ def _workprecision(args, out, err):
     out.write(_drift_table(rows) if args.long else _cost_table(rows))
     if args.out:
         out.write(f"{len(rows)} runs written to {args.out}\n")
+
+
+def _sweep(args, out, err):
+    from . import sweep
+    from .progress import Bar
+
+    _writable(args.out, sweep.FORMATS, "--out", "a .csv or .parquet file")
+    p = sweep.plan(args.scene, args.method, args.vary, args.measure, dict(args.set), args.theta, args.h, args.T)
+    bar = Bar(err)
+    try:
+        res = sweep.run(p, workers=args.workers, scheduler=args.scheduler, progress=bar)
+    finally:
+        bar.close()
+    try:
+        sweep.write(res, args.out)
+    except OSError as e:
+        raise InputError(f"cannot write {args.out}: {e.strerror or e}; choose another file") from None
+    out.write(sweep.summary(res) + f"  written to {args.out}\n")
 
 
 def _writable(path, suffixes, option, what):
@@ -300,6 +335,8 @@ def main(argv=None, out=None, err=None):
             _workprecision(args, out, err)
         elif args.command == "report":
             _report(args, out, err)
+        elif args.command == "sweep":
+            _sweep(args, out, err)
         else:
             from .bench import bench
 

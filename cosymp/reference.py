@@ -11,6 +11,15 @@ from .kernels.loops import energies, vector_field
 REFERENCE_FRACTION = 0.02
 
 
+def check_reference(setup, T):
+    """InputError if the fine rk8 reference to T (scenes without an exact flow) passes the step cap."""
+    fine_steps = T / (REFERENCE_FRACTION * setup.scene.time_scale)
+    if not setup.scene.has_flow and not fine_steps <= MAX_STEPS:
+        raise InputError(f"the reference for this run would take {fine_steps:.3g} steps of rk8 (at most "
+                         f"{REFERENCE_FRACTION:g} of the scene's time scale each), over the cap of "
+                         f"{MAX_STEPS:.0e}: shorten T")
+
+
 def reference_final(setup, h, T, z0=None):
     """(z at the run's final time steps*h, uncertainty) for a run of setup with step h to T.
 
@@ -23,11 +32,7 @@ def reference_final(setup, h, T, z0=None):
     if setup.scene.has_flow:
         ref = simulate(Setup.make(setup.scene, "exact", setup.values), t_final, t_final, z0=z0)
         return ref.z[-1], np.zeros(ref.z.shape[1])
-    fine_steps = t_final / (REFERENCE_FRACTION * setup.scene.time_scale)
-    if not fine_steps <= MAX_STEPS:
-        raise InputError(f"the reference for this run would take {fine_steps:.3g} steps of rk8 (at most "
-                         f"{REFERENCE_FRACTION:g} of the scene's time scale each), over the cap of "
-                         f"{MAX_STEPS:.0e}: shorten T")
+    check_reference(setup, t_final)
     k = max(1, math.ceil(h / (REFERENCE_FRACTION * setup.scene.time_scale)))
     fine = Setup.make(setup.scene, "rk8", setup.values)
     a = simulate(fine, h / k, t_final, z0=z0, stride=steps * k)

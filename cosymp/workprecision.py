@@ -158,11 +158,12 @@ class Scan:
     det_max_dev: float
 
 
-def scan(setup, h, steps, z0=None, pt0=None, t0=0.0, with_det=True, maps=DIAG_MAPS, tick=None):
+def scan(setup, h, steps, z0=None, pt0=None, t0=0.0, with_det=True, maps=DIAG_MAPS, tick=None, growth=None):
     """Run steps of h from t0 in chunks, recording every step; max |H + p_t| over every step
     and max |det M_k - 1| over every step or over `maps` evenly spaced ones (RunError on failure).
-    tick() is called after each chunk."""
-    every = max(1, math.ceil(steps / maps))
+    growth: a diagnostics.MapGrowth that takes the tangent map of every step (then det is
+    over every step too). tick() is called after each chunk."""
+    every = 1 if growth is not None else max(1, math.ceil(steps / maps))
     chunk = every * max(1, CHUNK // every)
     done = 0
     H_max = 0.0
@@ -172,9 +173,13 @@ def scan(setup, h, steps, z0=None, pt0=None, t0=0.0, with_det=True, maps=DIAG_MA
         n = min(chunk, steps - done)
         tr = simulate(setup, h, n * h, z0=z0, stride=1, t0=t, pt0=pt0)
         H_max = max(H_max, float(np.max(np.abs(tr.H_ext[:, 0]))))
-        if with_det:
+        if with_det or growth is not None:
             sample = dataclasses.replace(tr, t=tr.t[:-1:every], z=tr.z[:-1:every], pt=tr.pt[:-1:every])
-            det_max = max(det_max, float(np.max(det_deviation(tangent_maps(sample, last=True)))))
+            M = tangent_maps(sample, last=True)
+            if with_det:
+                det_max = max(det_max, float(np.max(det_deviation(M))))
+            if growth is not None:
+                growth.add(setup, M, sample.t)
         z0, pt0 = tr.z[-1], tr.pt[-1]
         t = t0 + (done + n) * h
         done += n

@@ -264,3 +264,47 @@ def vector_field(P, t, z, out):
         out[i] = g[n + i] * up
         out[n + i] = -g[i] * down
     out[2 * n] = -dhdt(P, C, 0, zs)
+
+
+@njit(**JIT)
+def exponents(P, T, out):
+    """The scene's scaling exponent e (scenes.base.SceneKernel.scaling) of a step from each T[k]."""
+    for k in range(T.shape[0]):
+        out[k] = scaling(P, T[k])[0]
+
+
+@njit(**JIT)
+def accumulate_product(M, E, A, state):
+    """A <- M_(K-1) ... M_0 A for one-step tangent maps in their steps' scaled coordinates.
+
+    M[k] is the map of a step taken in coordinates S_e = diag(2^-e I, 2^e I) with e = E[k]. A is
+    kept as S_e A_true for the exponent e = state[1] of the last map applied (0 at the start), and
+    divided after each map by its largest entry, whose log is added to state[0]; so the true
+    product is exp(state[0]) S_e^-1 A without ever leaving floating-point range."""
+    m = A.shape[0]
+    n = m // 2
+    B = np.empty_like(A)
+    for k in range(M.shape[0]):
+        shift = E[k] - int(state[1])
+        if shift != 0:
+            qf, pf = math.ldexp(1.0, -shift), math.ldexp(1.0, shift)
+            for i in range(n):
+                for j in range(m):
+                    A[i, j] *= qf
+                    A[n + i, j] *= pf
+            state[1] = E[k]
+        big = 0.0
+        for i in range(m):
+            for j in range(m):
+                s = 0.0
+                for r in range(m):
+                    s += M[k, i, r] * A[r, j]
+                B[i, j] = s
+                big = max(big, abs(s))
+        if not (0.0 < big < np.inf):
+            return False
+        for i in range(m):
+            for j in range(m):
+                A[i, j] = B[i, j] / big
+        state[0] += math.log(big)
+    return True

@@ -1,0 +1,434 @@
+"""Sweeps: figures of one method over a grid of parameters, on this machine or a Dask cluster.
+
+A grid has one axis per varied name (a scene parameter, h, T or theta), each NUM values from
+START to STOP, evenly spaced or (`log`) geometrically. Every grid point is one run of the method
+from the scene's initial state with step h to horizon T, and gives the requested measures:
+
+- H_ext_max_abs: max |H + p_t| over every step (0 for the exact flow of the extended system).
+- det_max_dev: max |det M_k - 1| over the one-step tangent maps M_k of every step.
+- error_final: ||z(T) - z_ref(T)|| / ||z_ref(T)|| over z = (q, p); z_ref the exact flow, else
+  rk8 at a step of at most 2% of the scene's time scale (reference.reference_final).
+- growth: ln(sigma_max(M_(N-1) ... M_0)) / T, the largest finite-time growth exponent of the
+  method's own map along the run (diagnostics.MapGrowth): 0 for a bounded linear map, the
+  Floquet exponent inside a Mathieu tongue, ln|R(ih)|/h for a one-step method with stability
+  function R on the harmonic oscillator.
+
+A run that fails (overflow, Newton) leaves NaN measures and its message in `status`.
+
+Points are independent and deterministic, so the figures are identical however they are
+spread: in-process, tasks run on a thread pool as wide as the machine (the compiled loops
+release the GIL); `workers=N` starts a Dask LocalCluster of N single-threaded processes;
+`scheduler=ADDRESS` uses a running Dask cluster. Points are grouped into tasks of about
+TASK_SECONDS (timed on the first point), and into at least TASKS_PER_WORKER tasks per worker
+while the grid allows, so scheduling costs a small fraction and the workers stay balanced.
+"""
+import csv
+import dataclasses
+import itertools
+import math
+import os
+import threading
+import time
+from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
+
+import numpy as np
+
+from .diagnostics import MapGrowth
+from .errors import CosympError, InputError, as_number, quoted
+from .integrate import Setup, check_step, get_scene
+from .methods import method as get_method
+from .reference import check_reference, reference_final
+from .workprecision import _relative, check_horizon, scan
+
+MEASURES = ("H_ext_max_abs", "det_max_dev", "error_final", "growth")
+RUN_NAMES = ("h", "T", "theta")
+MAX_POINTS = 1_000_000
+MAX_AXIS = 10_000
+TASK_SECONDS = 0.5
+TASKS_PER_WORKER = 4
+FORMATS = (".csv", ".parquet")
+
+
+def _number(text, label):
+    try:
+        value = float(text)
+    except ValueError:
+        raise InputError(f"{label} = {quoted(text.strip())} is not a number") from None
+    return as_number(value, label)
+
+
+@dataclasses.dataclass(frozen=True)
+class Axis:
+    """One varied name and its values (evenly spaced, or geometrically if `log`)."""
+
+    name: str
+    values: tuple
+    log: bool = False
+
+    @classmethod
+    def parse(cls, text):
+        """From NAME=START:STOP:NUM or NAME=START:STOP:NUM:log."""
+        name, sep, spec = str(text).partition("=")
+        parts = spec.split(":")
+        if not sep or not name.strip() or len(parts) not in (3, 4) or (len(parts) == 4 and parts[3] != "log"):
+            raise InputError(f"--vary {quoted(text)} is not NAME=START:STOP:NUM (or NAME=START:STOP:NUM:log), "
+                             "e.g. eps=0:0.5:50")
+        start, stop = (_number(v, f"{name.strip()}'s {w}") for v, w in zip(parts[:2], ("start", "stop")))
+        return cls.make(name.strip(), start, stop, parts[2].strip(), log=len(parts) == 4)
+
+    @classmethod
+    def make(cls, name, start, stop, num, log=False):
+        try:
+            num = int(num)
+        except (TypeError, ValueError):
+            raise InputError(f"{name}: NUM = {quoted(num)} must be a whole number of values") from None
+        if not 1 <= num <= MAX_AXIS:
+            raise InputError(f"{name}: NUM = {num} must be between 1 and {MAX_AXIS}")
+        if num == 1 and start != stop:
+            raise InputError(f"{name}: one value cannot span {start:g} to {stop:g}: give NUM >= 2 or START = STOP")
+        if log:
+            if not (start > 0 and stop > 0):
+                raise InputError(f"{name}: a log axis needs START and STOP > 0 (got {start:g}, {stop:g})")
+            values = np.geomspace(start, stop, num)
+        else:
+            values = np.linspace(start, stop, num)
+        return cls(name, tuple(float(v) for v in values), log)
+
+
+@dataclasses.dataclass(frozen=True)
+class Plan:
+    """A checked sweep: everything a worker needs to compute any of its points (picklable)."""
+
+    scene: str
+    method: str
+    values: tuple
+    theta: object
+    h: float
+    T: float
+    axes: tuple
+    measures: tuple
+
+    @property
+    def shape(self):
+        return tuple(len(a.values) for a in self.axes)
+
+    @property
+    def size(self):
+        return math.prod(self.shape)
+
+    def point(self, index):
+        """{name: value} of the varied names at flat index (C order: the first axis slowest)."""
+        idx = np.unravel_index(index, self.shape)
+        return {a.name: a.values[i] for a, i in zip(self.axes, idx)}
+
+    def run_of(self, point):
+        """(setup, h, T) of a grid point."""
+        run = {"h": self.h, "T": self.T, "theta": self.theta}
+        values = dict(self.values)
+        for name, v in point.items():
+            (run if name in RUN_NAMES else values)[name] = v
+        return Setup.make(self.scene, self.method, values, run["theta"]), run["h"], run["T"]
+
+
+def plan(scene, method, axes, measures=("growth",), values=None, theta=None, h=None, T=None):
+    """A Plan, or InputError saying what to change. axes: Axis objects or NAME=START:STOP:NUM
+    texts. The grid's corners are checked here (bounds are intervals), so a sweep does not fail
+    on its last point for a reason known at the start."""
+    sc = get_scene(scene) if isinstance(scene, str) else scene
+    m = get_method(method) if isinstance(method, str) else method
+    axes = tuple(a if isinstance(a, Axis) else Axis.parse(a) for a in axes)
+    if not axes:
+        raise InputError("nothing to sweep: give at least one --vary NAME=START:STOP:NUM")
+    names = [a.name for a in axes]
+    if len(set(names)) < len(names):
+        raise InputError(f"{quoted(max(names, key=names.count))} is varied twice: give each name once")
+    numeric = [p.name for p in sc.params if not p.choices and not isinstance(p.default, str)]
+    allowed = numeric + ["h", "T"] + (["theta"] if m.takes_theta else [])
+    for n in names:
+        if n not in allowed:
+            why = (" (theta applies to the methods 'theta' and 'theta-naive')" if n == "theta" else "")
+            raise InputError(f"cannot vary {quoted(n)} on scene '{sc.name}'{why}: choose from {', '.join(allowed)}")
+    measures = tuple(dict.fromkeys([measures] if isinstance(measures, str) else measures))
+    for name in measures:
+        if name not in MEASURES:
+            raise InputError(f"unknown measure {quoted(name)}: choose from {', '.join(MEASURES)}")
+    if not measures:
+        raise InputError(f"no measure given: choose from {', '.join(MEASURES)}")
+    if m.name == "exact" and {"det_max_dev", "growth"} & set(measures):
+        raise InputError("det_max_dev and growth need the method's one-step maps, which the exact flow does "
+                         "not provide: choose another method or measure")
+    size = math.prod(len(a.values) for a in axes)
+    if size > MAX_POINTS:
+        raise InputError(f"the grid has {size:,} points, over the cap of {MAX_POINTS:,}: use fewer values")
+    fixed = dict(values or {})
+    run = {"h": h, "T": T, "theta": theta}
+    for n in names:
+        if n in fixed or run.get(n) is not None:
+            raise InputError(f"{quoted(n)} is both given a fixed value and varied: drop one")
+    sc.values(fixed)
+    p = Plan(sc.name, m.name, tuple(fixed.items()), theta,
+             sc.h if h is None else as_number(h, "h"), sc.T if T is None else check_horizon(T),
+             axes, measures)
+    corners = itertools.product(*[(a.values[0], a.values[-1]) for a in axes])
+    for corner in corners:
+        setup, hh, TT = p.run_of(dict(zip(names, corner)))
+        check_step(hh, TT)
+        check_horizon(TT)
+        if "error_final" in measures:
+            check_reference(setup, check_step(hh, TT) * hh)
+    return p
+
+
+def figures(setup, h, T, measures):
+    """(the measures at one point, status) for one run (see the module's definitions)."""
+    out = dict.fromkeys(measures, math.nan)
+    try:
+        steps = check_step(h, T)
+        growth = MapGrowth(2 * setup.scene.ndof) if "growth" in measures else None
+        s = scan(setup, h, steps, with_det="det_max_dev" in measures, growth=growth)
+        out["H_ext_max_abs"], out["det_max_dev"] = s.H_ext_max_abs, s.det_max_dev
+        if growth is not None:
+            out["growth"] = growth.log_norm() / (steps * h)
+        if "error_final" in measures:
+            out["error_final"] = _relative(s.z, reference_final(setup, h, T)[0][0])[0]
+    except CosympError as e:
+        return {k: math.nan for k in measures}, str(e)
+    return {k: out[k] for k in measures}, "ok"
+
+
+def evaluate(p, indices, stop=None):
+    """Figures of the points at flat indices, in order: (indices, {measure: array}, statuses,
+    seconds). Stops early (fewer points) once `stop` (a threading.Event) is set."""
+    start = time.perf_counter()
+    cols = {k: [] for k in p.measures}
+    statuses = []
+    done = []
+    for i in indices:
+        if stop is not None and stop.is_set():
+            break
+        try:
+            setup, h, T = p.run_of(p.point(i))
+            values, status = figures(setup, h, T, p.measures)
+        except InputError as e:
+            values, status = {k: math.nan for k in p.measures}, str(e)
+        for k in p.measures:
+            cols[k].append(values[k])
+        statuses.append(status)
+        done.append(i)
+    return done, {k: np.array(v, dtype=float) for k, v in cols.items()}, statuses, time.perf_counter() - start
+
+
+@dataclasses.dataclass
+class Result:
+    """A finished sweep: measures as arrays of the grid's shape, the status of every point, and
+    how it ran: wall time in all; the parallel phase (every point after the first two, which run
+    here first to load the compiled code and time a point): its tasks' compute seconds and its
+    wall time from submitting the tasks to the last result."""
+
+    plan: Plan
+    values: dict
+    status: np.ndarray
+    wall_s: float
+    where: str
+    workers: int
+    task_seconds: list
+    spread_s: float
+
+    def rows(self):
+        """One dict per point (C order): the varied names, the measures, status."""
+        flat = {k: v.ravel() for k, v in self.values.items()}
+        st = self.status.ravel()
+        for i in range(self.plan.size):
+            yield {**self.plan.point(i), **{k: float(flat[k][i]) for k in self.plan.measures}, "status": st[i]}
+
+    @property
+    def overhead_per_task_s(self):
+        """(parallel wall x workers - compute) / tasks: what scheduling, transfer and idle workers
+        cost each task of the parallel phase."""
+        return max(0.0, self.spread_s * self.workers - sum(self.task_seconds)) / max(1, len(self.task_seconds))
+
+
+def split(size, per_task):
+    """Consecutive index ranges of at most per_task points covering range(size)."""
+    return [range(a, min(size, a + per_task)) for a in range(0, size, per_task)]
+
+
+def task_size(p, seconds_per_point, workers, remaining):
+    """Points per task: about TASK_SECONDS each, but at least TASKS_PER_WORKER tasks per worker
+    while there are that many points."""
+    by_time = max(1, math.ceil(TASK_SECONDS / max(seconds_per_point, 1e-6)))
+    by_balance = max(1, remaining // (TASKS_PER_WORKER * workers))
+    return min(by_time, by_balance)
+
+
+def run(p, workers=None, scheduler=None, progress=None):
+    """Compute every point of plan p; returns a Result.
+
+    Default: in this process on os.cpu_count() threads. workers=N: a Dask LocalCluster of N
+    processes (started and stopped here). scheduler=ADDRESS: a running Dask cluster.
+    progress(done, total, label) is called as points finish; an exception raised from it stops
+    the sweep (running tasks finish their current point) and propagates.
+    """
+    if workers is not None and scheduler is not None:
+        raise InputError("give --workers or --scheduler, not both")
+    if workers is not None and (not isinstance(workers, int) or not 1 <= workers <= 256):
+        raise InputError(f"workers = {quoted(workers)} must be a whole number from 1 to 256")
+    report = progress or (lambda done, total, label: None)
+    start = time.perf_counter()
+    report(0, p.size, "first points (loading the compiled code, timing a point)")
+    parts = [evaluate(p, range(1)), evaluate(p, range(1, min(2, p.size)))]
+    seconds = parts[1][3]
+    report(min(2, p.size), p.size, "points")
+    spread = time.perf_counter()
+    if workers is None and scheduler is None:
+        width = os.cpu_count() or 1
+        more = _threads(p, tasks_for(p, seconds, width), width, report)
+        where = f"this process, {width} threads"
+    else:
+        more, where, width, spread = _dask(p, seconds, workers, scheduler, report)
+    end = time.perf_counter()
+    return _assemble(p, parts + more, end - start, where, width, [m[3] for m in more], end - spread)
+
+
+def tasks_for(p, seconds_per_point, workers):
+    """Tasks for the points after the first two (computed first, the second one timed)."""
+    per = task_size(p, seconds_per_point, workers, p.size - 2)
+    return [range(2 + r.start, 2 + r.stop) for r in split(max(0, p.size - 2), per)]
+
+
+def _threads(p, tasks, width, report):
+    stop = threading.Event()
+    parts = []
+    done = 2
+    with ThreadPoolExecutor(max_workers=width, thread_name_prefix="cosymp-sweep") as pool:
+        pending = {pool.submit(evaluate, p, t, stop) for t in tasks}
+        try:
+            while pending:
+                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for f in finished:
+                    parts.append(f.result())
+                    done += len(parts[-1][0])
+                report(done, p.size, "points")
+        except BaseException:
+            stop.set()
+            for f in pending:
+                f.cancel()
+            raise
+    return parts
+
+
+def _dask(p, seconds_per_point, workers, scheduler, report):
+    try:
+        from distributed import Client, LocalCluster, as_completed
+    except ImportError:
+        raise InputError("--workers and --scheduler need Dask: pip install 'dask[distributed]'") from None
+    import logging
+
+    cluster = None
+    try:
+        if scheduler is None:
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                   dashboard_address=":0", silence_logs=logging.ERROR)
+            client = Client(cluster)
+        else:
+            try:
+                client = Client(scheduler, timeout=10)
+            except (OSError, TimeoutError, ValueError) as e:
+                raise InputError(f"cannot reach a Dask scheduler at {quoted(scheduler)}: {e}; start one "
+                                 "(dask scheduler) or check the address") from None
+        with client:
+            width = max(1, sum(client.nthreads().values()))
+            where = (f"Dask LocalCluster, {workers} worker process{'es' if workers > 1 else ''}" if cluster is not None
+                     else f"Dask cluster at {scheduler}, {width} worker threads")
+            tasks = tasks_for(p, seconds_per_point, width)
+            spread = time.perf_counter()
+            futures = client.map(evaluate, [p] * len(tasks), tasks, pure=False)
+            parts = []
+            done = 2
+            try:
+                for f in as_completed(futures):
+                    parts.append(f.result())
+                    done += len(parts[-1][0])
+                    report(done, p.size, "points")
+            except BaseException:
+                client.cancel(futures)
+                raise
+    finally:
+        if cluster is not None:
+            cluster.close()
+    return parts, where, width, spread
+
+
+def _assemble(p, parts, wall, where, width, task_seconds, spread_s):
+    values = {k: np.full(p.size, np.nan) for k in p.measures}
+    status = np.full(p.size, "not computed", dtype=object)
+    for indices, cols, statuses, _ in parts:
+        idx = np.asarray(indices, dtype=np.intp)
+        for k in p.measures:
+            values[k][idx] = cols[k]
+        status[idx] = statuses
+    return Result(p, {k: v.reshape(p.shape) for k, v in values.items()}, status.reshape(p.shape), wall,
+                  where, width, task_seconds, spread_s)
+
+
+def write(result, path):
+    """Write the sweep as tidy rows (one per point) to FILE.csv or FILE.parquet."""
+    path = os.fspath(path)
+    suffix = os.path.splitext(path)[1].lower()
+    if suffix not in FORMATS:
+        raise InputError(f"-o {quoted(path)}: the file must end in .csv or .parquet")
+    names = [a.name for a in result.plan.axes] + list(result.plan.measures) + ["status"]
+    if suffix == ".csv":
+        with open(path, "w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=names)
+            w.writeheader()
+            w.writerows(result.rows())
+        return
+    try:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+    except ImportError:
+        raise InputError("writing .parquet needs pyarrow: pip install pyarrow, or write .csv") from None
+    rows = list(result.rows())
+    table = pa.table({n: [r[n] for r in rows] for n in names})
+    meta = {"scene": result.plan.scene, "method": result.plan.method, "h": repr(result.plan.h),
+            "T": repr(result.plan.T), "fixed": repr(dict(result.plan.values))}
+    pq.write_table(table.replace_schema_metadata({f"cosymp.{k}": v for k, v in meta.items()}), path)
+
+
+def read(path):
+    """{column: list} of a sweep written by `write` (csv or parquet)."""
+    path = os.fspath(path)
+    if path.lower().endswith(".parquet"):
+        import pyarrow.parquet as pq
+
+        return pq.read_table(path).to_pydict()
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    cols = {k: [r[k] for r in rows] for k in (rows[0] if rows else {})}
+    return {k: (v if k == "status" else [float(x) for x in v]) for k, v in cols.items()}
+
+
+
+def summary(result):
+    """A few lines on what ran, how, and the range of each measure."""
+    p = result.plan
+    grid = " x ".join(f"{a.name} {len(a.values)}" for a in p.axes)
+    failed = int(np.sum(result.status != "ok"))
+    tasks = len(result.task_seconds)
+    lines = [f"{p.scene} with {p.method}: {p.size} points ({grid}), h = {p.h:g}, T = {p.T:g} where not varied",
+             f"  {result.wall_s:.2f} s on {result.where}; {tasks} tasks after the first two points"
+             + (f", {sum(result.task_seconds) / tasks:.3g} s of compute each, overhead "
+                f"{1e3 * result.overhead_per_task_s:.3g} ms per task" if tasks else "")]
+    for k in p.measures:
+        v = result.values[k]
+        if np.all(np.isnan(v)):
+            lines.append(f"  {k}: no finite value")
+            continue
+        hi = np.unravel_index(np.nanargmax(v), v.shape)
+        at = ", ".join(f"{a.name} = {a.values[i]:.4g}" for a, i in zip(p.axes, hi))
+        lines.append(f"  {k}: min {np.nanmin(v):.4g}, max {np.nanmax(v):.4g} (at {at})")
+    if failed:
+        first = next(s for s in result.status.ravel() if s != "ok")
+        lines.append(f"  {failed} point{'s' if failed > 1 else ''} failed, e.g.: {first}")
+    return "\n".join(lines) + "\n"
