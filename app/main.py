@@ -25,6 +25,7 @@ from .state import (
     LongRun,
     Note,
     Playback,
+    StabilityMap,
     Study,
     ThetaLesson,
     WorkPrecision,
@@ -39,6 +40,7 @@ from .views import (
     PlayView,
     PresetLinks,
     SceneInfo,
+    StabilityMapView,
     StructureView,
     ThetaView,
     WorkPrecisionView,
@@ -70,6 +72,7 @@ class App(param.Parameterized):
         self.long = LongRun(study=self.study)
         self.measure = WorkPrecision(study=self.study)
         self.horizons = LongHorizons(study=self.study)
+        self.stability = StabilityMap(study=self.study)
         self.study.param.watch(self._on_message, "message")
         s = self.study
         views = {"compare": partial(OrbitsView, study=s), "structure": partial(StructureView, study=s),
@@ -77,7 +80,8 @@ class App(param.Parameterized):
                  "theta": partial(ThetaView, lesson=self.lesson),
                  "play": partial(PlayView, study=s, playback=self.playback),
                  "long": partial(LongRunView, long=self.long),
-                 "workprecision": partial(WorkPrecisionView, measure=self.measure, long=self.horizons)}
+                 "workprecision": partial(WorkPrecisionView, measure=self.measure, long=self.horizons),
+                 "map": partial(StabilityMapView, stability=self.stability)}
         names = list(VIEWS.values())
         # Each tab is built when first shown (dynamic tabs render only the active one).
         self.tabs = pn.Tabs(*[(label, pn.param.ParamFunction(pn.bind(views[name]), lazy=True))
@@ -94,9 +98,9 @@ class App(param.Parameterized):
     def _stop(self, session_context):
         """A closed page stops its background runs (the long run after its current chunk, the
         measurements before their next run) and gives back the memory of its results."""
-        for background in (self.long, self.measure, self.horizons):
+        for background in (self.long, self.measure, self.horizons, self.stability):
             background.cancel()
-        for derived in (self.study, self.gauges, self.lesson):
+        for derived in (self.study, self.gauges, self.lesson, self.stability):
             derived.release()
 
     def _on_message(self, event):

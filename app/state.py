@@ -24,6 +24,7 @@ from functools import cache, partial
 import numpy as np
 import param
 
+from cosymp import sweep
 from cosymp import workprecision as wp
 from cosymp.diagnostics import (
     det_deviation,
@@ -49,7 +50,8 @@ DENSE_RECORDS = 100_000
 CLOUD_POINTS = {True: 32, False: 64}
 DELTA = 1e-4
 VIEWS = {"Orbits": "compare", "Structure": "structure", "Cloud": "cloud", "Gauges": "gauges",
-         "Theta lesson": "theta", "Play": "play", "Long run": "long", "Work–precision": "workprecision"}
+         "Theta lesson": "theta", "Play": "play", "Long run": "long", "Work–precision": "workprecision",
+         "Stability map": "map"}
 URL_NAMES = {"scene": "scene", "method": "method", "other": "vs", "theta": "theta", "h": "h", "T": "T",
              "values": "p", "view": "view"}
 LONG_URL_NAMES = {"T_long": "T_long"}
@@ -816,7 +818,7 @@ class Background(param.Parameterized):
             return
         try:
             job = self._job()
-            lease = BUDGET.lease(MEASURE_BYTES, "this measurement")
+            lease = BUDGET.lease(self._bytes(job), "this measurement")
         except InputError as err:
             self.study.say(Note("error", f"{self.KIND}: {err}"))
             return
@@ -858,6 +860,10 @@ class Background(param.Parameterized):
 
     def _job(self):
         raise NotImplementedError
+
+    def _bytes(self, job):
+        """The memory the computation leases while it runs."""
+        return MEASURE_BYTES
 
     def _describe(self, job):
         raise NotImplementedError
@@ -1026,3 +1032,119 @@ class LongHorizons(Background):
             self.study.say(Note("warning", f"long horizons shown up to T = {top:g} only: {short[0]['status']}"))
             rows = [r for r in rows if r not in short]
         super()._finish(job, rows)
+
+
+MAP_MAX_SIDE = 100
+MAP_MAX_STEPS = 200_000_000
+# Default axes per scene: (x name, start, stop, log), (y name, start, stop, log).
+MAP_AXES = {
+    "decaying": (("h", 0.05, 3.0, True), ("lam", 0.1, 5.0, False)),
+    "damped": (("h", 0.05, 3.0, True), ("gamma", -0.5, 0.5, False)),
+    "modulated": (("alpha", 0.5, 4.5, False), ("eps", 0.0, 0.8, False)),
+    "charged": (("h", 0.001, 0.1, True), ("B0", 0.0, 2.0, False)),
+    "kapitza": (("nu", 5.0, 80.0, False), ("a", 0.0, 0.5, False)),
+}
+
+
+def map_bytes(scene, points_steps, threads):
+    """What a sweep holds at once: per thread one chunk of every-step records (t, z, p_t, H), its
+    copy for the tangent maps and the maps (2n x 2n each), plus the grid's results."""
+    m = 2 * scene.ndof
+    per_step = 8 * (2 * (m + 3) + m * m)
+    return threads * min(wp.CHUNK, points_steps + 1) * per_step + (8 << 20)
+
+
+class StabilityMap(Background):
+    """A measure of the study's method over a grid of two varied names (scene parameters, h, T or θ)
+    with the study's other values, computed by cosymp.sweep on this machine's cores in the worker
+    thread. A cell can be opened in the Orbits view (`open_cell`)."""
+
+    measure = param.Selector(default="growth", objects=list(sweep.MEASURES), doc="What each cell shows.")
+    x = param.Selector(default="h", objects=["h"], label="x axis")
+    x_start = param.Number(default=0.05, label="from")
+    x_stop = param.Number(default=3.0, label="to")
+    x_log = param.Boolean(default=True, label="log x")
+    nx = param.Integer(default=30, bounds=(2, MAP_MAX_SIDE), label="cells in x")
+    y = param.Selector(default="gamma", objects=["gamma"], label="y axis")
+    y_start = param.Number(default=-0.5, label="from")
+    y_stop = param.Number(default=0.5, label="to")
+    y_log = param.Boolean(default=False, label="log y")
+    ny = param.Integer(default=30, bounds=(2, MAP_MAX_SIDE), label="cells in y")
+    result = param.Parameter(doc="The last completed sweep (cosymp.sweep.Result).")
+    KIND = "stability map"
+
+    def __init__(self, **params):
+        super().__init__(**params)
+        self._on_scene()
+        self.study.param.watch(self._on_scene, ["scene", "method"])
+
+    def names(self):
+        """What can be varied: the scene's numeric parameters, h, T and (theta methods) θ."""
+        s = self.study
+        numeric = [p.name for p in s.scene_obj.params if not p.choices and not isinstance(p.default, str)]
+        return numeric + ["h", "T"] + (["theta"] if METHODS[s.method].takes_theta else [])
+
+    def _on_scene(self, *events):
+        names = self.names()
+        self.param.x.objects = self.param.y.objects = names
+        if events and all(e.name == "method" for e in events) and {self.x, self.y} <= set(names):
+            return
+        (xn, x0, x1, xl), (yn, y0, y1, yl) = MAP_AXES[self.study.scene]
+        self.param.update(x=xn, x_start=x0, x_stop=x1, x_log=xl, y=yn, y_start=y0, y_stop=y1, y_log=yl)
+
+    def _job(self):
+        s = self.study
+        if self.x == self.y:
+            raise InputError(f"x and y both vary {self.x}: choose two different names")
+        axes = [sweep.Axis.make(self.x, self.x_start, self.x_stop, self.nx, self.x_log),
+                sweep.Axis.make(self.y, self.y_start, self.y_stop, self.ny, self.y_log)]
+        varied = {self.x, self.y}
+        fixed = {k: v for k, v in s.values.items() if k not in varied}
+        run = {k: None if k in varied else v for k, v in
+               (("theta", theta_for(s.method, s.theta)), ("h", s.h), ("T", s.T))}
+        plan = sweep.plan(s.scene, s.method, axes, (self.measure,), fixed, **run)
+        steps = sum(check_step(*plan.run_of(plan.point(i))[1:]) for i in range(plan.size))
+        if steps > MAP_MAX_STEPS:
+            raise InputError(f"this map takes {steps:.3g} steps in all, beyond this view's {MAP_MAX_STEPS:.0e}: "
+                             "use fewer cells, larger h or a shorter T (or run `cosymp sweep` on a cluster)")
+        return plan
+
+    def _bytes(self, plan):
+        most = max(check_step(*plan.run_of(plan.point(i))[1:]) for i in (0, plan.size - 1))
+        return map_bytes(SCENES[plan.scene], most, os.cpu_count() or 1)
+
+    def _describe(self, plan):
+        (ax, ay) = plan.axes
+        fixed = ", ".join(f"{k} = {v}" for k, v in plan.values)
+        return (f"{plan.measures[0]} of {plan.method} on {plan.scene}" + (f" ({fixed})" if fixed else "")
+                + f": {ax.name} {ax.values[0]:g}…{ax.values[-1]:g} × {ay.name} {ay.values[0]:g}…{ay.values[-1]:g}, "
+                f"{plan.size} cells, h = {plan.h:g}, T = {plan.T:g} where not varied")
+
+    def _compute(self, plan, progress):
+        return sweep.run(plan, progress=progress)
+
+    def _finish(self, plan, result):
+        self.job = plan
+        self.param.update(result=result, setting=self._describe(plan))
+
+    def release(self):
+        self.result = None
+
+    def open_cell(self, i, j):
+        """Open cell (i along x, j along y) of the last map in the Orbits view: the map's scene,
+        method and values with that cell's varied values."""
+        plan = self.job
+        point = {plan.axes[0].name: plan.axes[0].values[i], plan.axes[1].name: plan.axes[1].values[j]}
+        values = dict(plan.values)
+        updates = {"method": plan.method, "view": "compare"}
+        for name, v in point.items():
+            if name in sweep.RUN_NAMES:
+                updates[name] = v
+            else:
+                values[name] = v
+        if plan.theta is not None and "theta" not in point:
+            updates["theta"] = plan.theta
+        updates.update(h=point.get("h", plan.h), T=point.get("T", plan.T))
+        if plan.scene != self.study.scene:
+            self.study.scene = plan.scene
+        self.study.param.update(values=values, **updates)

@@ -35,6 +35,7 @@ from .state import (
     LongHorizons,
     LongRun,
     Playback,
+    StabilityMap,
     Study,
     ThetaLesson,
     WorkPrecision,
@@ -1072,4 +1073,106 @@ class WorkPrecisionView(pn.viewable.Viewer):
             *long_plots,
             note(pn.bind(lambda r: reference_html(r) + GROWTH_TEXT + growth_html(r) if r else "", lh.param.rows)),
             **wide,
+        )
+
+
+MAP_TEXT = ("<p>One measure of the sidebar's method over a grid of two varied quantities (scene parameters, h, T "
+            "or θ), every other value taken from the sidebar. Each cell is one run from the scene's initial "
+            "state: <b>growth</b> is ln σ<sub>max</sub> of the product of the method's one-step maps, over T (a "
+            "finite-time Lyapunov exponent of the method: 0 where its map stays bounded, the Floquet exponent "
+            "inside a parametric-resonance tongue, ln|R(ih)|/h for RK4 beyond its stability limit); "
+            "<b>H_ext_max_abs</b> the largest |H~| = |H + p_t| over the run; <b>det_max_dev</b> the largest "
+            "|det M<sub>k</sub> − 1| of the one-step maps; <b>error_final</b> the relative error at T against the "
+            "exact flow or a fine RK8 run. Black cells: the run failed (the line below the map says why). The "
+            "same grid runs from the command line, also on a Dask cluster: <code>{command}</code>. "
+            "<b>Click a cell</b> to open that run in the Orbits view.</p>")
+MAP_HEIGHT = 480
+LOG_MEASURES = ("H_ext_max_abs", "det_max_dev", "error_final")
+LOG_FLOOR = 1e-17
+
+
+def map_command(plan):
+    """The `cosymp sweep` command line of a plan."""
+    fixed = "".join(f" --set {k}={v}" for k, v in plan.values)
+    vary = "".join(f" --vary {a.name}={a.values[0]:g}:{a.values[-1]:g}:{len(a.values)}" + (":log" if a.log else "")
+                   for a in plan.axes)
+    theta = f" --theta {plan.theta:g}" if plan.theta is not None else ""
+    return (f"cosymp sweep {plan.scene} --method {plan.method}{vary} --measure {' '.join(plan.measures)} "
+            f"--h {plan.h:g} --T {plan.T:g}{theta}{fixed} -o map.csv")
+
+
+def map_plot(result, on_tap):
+    """The heat map of a sweep's single measure over its two axes; a tap calls on_tap(i, j)."""
+    plan = result.plan
+    ax, ay = plan.axes
+    key = plan.measures[0]
+    Z = result.values[key].T
+    log = [ax.log, ay.log]
+    opts = {"cmap": "RdBu_r", "colorbar": True, "clipping_colors": {"NaN": "black"}}
+    if key in LOG_MEASURES:
+        Z = np.where(np.isnan(Z), np.nan, np.maximum(Z, LOG_FLOOR))
+        opts.update(cmap="viridis", logz=True)
+    else:
+        top = float(np.nanmax(np.abs(Z))) if np.any(np.isfinite(Z)) else 1.0
+        opts.update(clim=(-top or -1.0, top or 1.0))
+    mesh = hv.QuadMesh((np.array(ax.values), np.array(ay.values), Z), kdims=[ax.name, ay.name], vdims=[key])
+    mesh = mesh.opts(responsive=True, height=MAP_HEIGHT, logx=log[0], logy=log[1], tools=["hover", "tap"],
+                     title=f"{key} of {plan.method} on {plan.scene}", toolbar="right",
+                     default_tools=["pan", "wheel_zoom", "box_zoom", "reset", "save"], **opts)
+    tap = hv.streams.Tap(source=mesh)
+
+    def nearest(axis, v, is_log):
+        vals = np.log(axis.values) if is_log else np.array(axis.values)
+        return int(np.argmin(np.abs(vals - (np.log(v) if is_log else v))))
+
+    tap.add_subscriber(lambda x, y: None if x is None or y is None
+                       else on_tap(nearest(ax, x, log[0]), nearest(ay, y, log[1])))
+    return pn.pane.HoloViews(mesh, sizing_mode="stretch_width", min_height=MAP_HEIGHT + 10)
+
+
+def map_failures(result):
+    if result is None:
+        return ""
+    bad = result.status != "ok"
+    if not bad.any():
+        return (f"<p class='doc'>Every one of the {result.plan.size} runs completed ({html.escape(result.where)}, "
+                f"{result.wall_s:.1f} s).</p>")
+    first = next(s for s in result.status.ravel() if s != "ok")
+    return (f"<p class='doc'><b>{int(bad.sum())} of {result.plan.size} runs failed</b> (black cells), e.g.: "
+            f"{html.escape(first)}</p>")
+
+
+class StabilityMapView(pn.viewable.Viewer):
+    """The Stability map: controls for the two axes and the measure, Start/Cancel with progress,
+    the heat map (click a cell to open it), and the runs that failed."""
+
+    stability = param.ClassSelector(class_=StabilityMap)
+
+    def __panel__(self):
+        m = self.stability
+        row, status = run_controls(m, "Compute map")
+
+        def axis(prefix):
+            p = m.param
+            return pn.Row(pn.widgets.Select.from_param(p[prefix], width=120),
+                          pn.widgets.FloatInput.from_param(p[f"{prefix}_start"], width=110),
+                          pn.widgets.FloatInput.from_param(p[f"{prefix}_stop"], width=110),
+                          pn.widgets.IntInput.from_param(p[f"n{prefix}"], width=100),
+                          pn.widgets.Checkbox.from_param(p[f"{prefix}_log"], margin=(30, 10, 10, 10)))
+
+        def shown(result):
+            if result is None:
+                return note("<p class='doc'>No map yet: choose the axes and press Compute map.</p>")
+            return map_plot(result, m.open_cell)
+
+        return pn.Column(
+            note(pn.bind(lambda r: MAP_TEXT.format(command=html.escape(map_command(r.plan)) if r else
+                                                   "cosymp sweep SCENE --vary NAME=START:STOP:NUM ..."),
+                         m.param.result)),
+            pn.widgets.Select.from_param(m.param.measure, width=200),
+            axis("x"), axis("y"),
+            row, status,
+            pn.panel(pn.bind(shown, m.param.result), sizing_mode="stretch_width"),
+            note(pn.bind(map_failures, m.param.result)),
+            sizing_mode="stretch_width",
         )

@@ -13,8 +13,9 @@ import subprocess
 import sys
 import time
 import urllib.request
-from urllib.parse import urlencode
+from urllib.parse import parse_qs, urlencode, urlparse
 
+import numpy as np
 import pytest
 from playwright.sync_api import expect
 
@@ -323,6 +324,46 @@ def test_work_precision_measures_a_click_opens_the_point_and_long_horizons_cance
     page.page.locator("button", has_text="Cancel").nth(1).click()
     page.page.get_by_text("cancelled after").first.wait_for(timeout=5_000)
     assert time.monotonic() - clicked < 5
+    page.check()
+
+
+MAP_PIXEL_JS = """([title, x, y]) => {
+    // Screen position of data point (x, y) in the plot titled `title`.
+    const roots = Bokeh.index instanceof Map ? [...Bokeh.index.values()] : Object.values(Bokeh.index);
+    const seen = new Set();
+    let found = null;
+    function walk(v) {
+        if (!v || seen.has(v) || found) return;
+        seen.add(v);
+        if (v.frame && v.model.title && v.model.title.text === title) {
+            const box = v.canvas_view.el.getBoundingClientRect();
+            found = {x: box.left + v.frame.x_scale.compute(x), y: box.top + v.frame.y_scale.compute(y)};
+        }
+        for (const c of (v.child_views ? [...v.child_views] : [])) walk(c);
+    }
+    for (const r of roots) walk(r);
+    return found;
+}"""
+
+
+def test_stability_map_shows_the_mathieu_tongue_and_a_click_opens_the_cell(page):
+    """The default map of the modulated scene (alpha 0.5...4.5 x eps 0...0.8, 30 x 30 cells) is
+    computed in the background; a click on the cell nearest (alpha, eps) = (2, 0.6), inside the
+    principal tongue, opens that run in the Orbits view with those values."""
+    page.open(query(scene="modulated", view="map"))
+    page.page.locator("button", has_text="Compute map").click()
+    page.page.locator("b.wpstatus").filter(has_text="done in").wait_for(timeout=120_000)
+    title = "growth of midpoint on modulated"
+    page.page.wait_for_function(f"() => ({MAP_PIXEL_JS})([{title!r}, 2.0, 0.6]) !== null")
+    page.page.wait_for_timeout(1000)
+    page.shot("12-stability-map")
+    alphas, epss = np.linspace(0.5, 4.5, 30), np.linspace(0.0, 0.8, 30)
+    a, e = alphas[np.argmin(abs(alphas - 2.0))], epss[np.argmin(abs(epss - 0.6))]
+    pixel = page.page.evaluate(MAP_PIXEL_JS, [title, a, e])
+    page.page.mouse.click(pixel["x"], pixel["y"])
+    expect(page.page.locator(".bk-tab.bk-active")).to_have_text("Orbits")
+    values = json.loads(parse_qs(urlparse(page.page.url).query)["p"][0])
+    assert values == pytest.approx({"alpha": a, "eps": e})
     page.check()
 
 

@@ -1,0 +1,134 @@
+"""The app's Stability map state (app.state.StabilityMap) and its heat map, without a server."""
+import math
+import tracemalloc
+
+import holoviews as hv
+import numpy as np
+import pytest
+
+from app import state, views
+from app.state import MAP_AXES, StabilityMap, Study
+from cosymp import sweep
+
+
+@pytest.fixture(scope="module", autouse=True)
+def plotting_backend():
+    hv.extension("bokeh")
+
+
+@pytest.fixture(scope="module")
+def tongue():
+    """The modulated scene's default axes (alpha x eps) at 9 x 5 cells, growth of midpoint."""
+    s = Study(scene="modulated")
+    m = StabilityMap(study=s, nx=9, ny=5)
+    m.start()
+    return s, m
+
+
+def test_each_scene_gets_its_default_axes_and_the_study_names_its_choices():
+    s = Study()
+    m = StabilityMap(study=s)
+    for scene, ((xn, x0, x1, xl), (yn, y0, y1, yl)) in MAP_AXES.items():
+        s.scene = scene
+        assert (m.x, m.x_start, m.x_stop, m.x_log, m.y, m.y_start, m.y_stop, m.y_log) == (xn, x0, x1, xl, yn, y0, y1, yl)
+        numeric = [p.name for p in s.scene_obj.params if not p.choices and not isinstance(p.default, str)]
+        assert m.param.x.objects == numeric + ["h", "T"]
+    s.method = "theta"
+    assert m.param.x.objects[-1] == "theta" and (m.x, m.y) == ("nu", "a")
+
+
+def test_the_map_shows_the_principal_tongue_where_the_theory_puts_it(tongue):
+    """At alpha = 2 (inside the principal tongue) growth rises with eps, to about eps/4 at
+    eps = 0.8 (finite T = 50: within 30 %); at alpha = 4 (between tongues) it stays near 0."""
+    _, m = tongue
+    res = m.result
+    alpha, eps = (np.array(a.values) for a in res.plan.axes)
+    g = res.values["growth"]
+    assert g.shape == (9, 5) and (res.status == "ok").all()
+    i2, i4 = int(np.argmin(abs(alpha - 2.0))), int(np.argmin(abs(alpha - 4.0)))
+    assert alpha[i2] == 2.0 and np.all(np.diff(g[i2]) > 0)
+    assert g[i2, -1] == pytest.approx(eps[-1] / 4, rel=0.3)
+    assert np.max(np.abs(g[i4])) < 0.1 * g[i2, -1]
+    assert m.status.startswith("done") and "alpha 0.5…4.5 × eps 0…0.8" in m.setting
+
+
+def test_the_map_equals_the_command_lines_sweep(tongue):
+    """What the view shows is cosymp.sweep's result for the plan its command line names."""
+    _, m = tongue
+    cmd = views.map_command(m.result.plan)
+    assert cmd.startswith("cosymp sweep modulated --method midpoint --vary alpha=0.5:4.5:9 --vary eps=0:0.8:5")
+    again = sweep.run(sweep.plan("modulated", "midpoint", ["alpha=0.5:4.5:9", "eps=0:0.8:5"], ["growth"],
+                                 h=0.1, T=50))
+    assert np.array_equal(again.values["growth"], m.result.values["growth"])
+
+
+def test_clicking_a_cell_opens_its_run_in_the_orbits_view(tongue):
+    s, m = tongue
+    m.open_cell(3, 4)
+    plan = m.result.plan
+    assert s.view == "compare" and s.method == "midpoint"
+    assert s.values == {"alpha": plan.axes[0].values[3], "eps": plan.axes[1].values[4]}
+    assert s.results.entries[0].comparison.run.setup.values["eps"] == plan.axes[1].values[4]
+
+
+def test_a_cell_of_an_h_axis_sets_the_step():
+    s = Study(scene="decaying")
+    m = StabilityMap(study=s, nx=3, ny=2, measure="error_final")
+    m.start()
+    assert m.result.plan.axes[0].log and m.result.plan.axes[0].name == "h"
+    m.open_cell(2, 1)
+    assert s.h == m.result.plan.axes[0].values[2] == 3.0 and s.values == {"lam": 5.0}
+
+
+def test_the_heat_map_taps_to_the_nearest_cell_and_marks_failures(tongue):
+    _, m = tongue
+    opened = []
+    pane = views.map_plot(m.result, lambda i, j: opened.append((i, j)))
+    mesh = pane.object
+    assert isinstance(mesh, hv.QuadMesh) and mesh.vdims[0].name == "growth"
+    tap = hv.streams.Stream.registry[mesh][0]
+    tap.event(x=2.05, y=0.39)
+    assert opened == [(3, 2)]
+    assert "Every one of the 45 runs completed" in views.map_failures(m.result)
+    failed = sweep.run(sweep.plan("modulated", "rk4", ["h=2:3.6:3", "eps=0:0:1"], ["growth"], T=5000))
+    assert list(failed.status.ravel() != "ok") == [False, False, True]
+    assert "1 of 3 runs failed" in views.map_failures(failed) and "overflow" in views.map_failures(failed)
+
+
+@pytest.mark.parametrize("change, needle", [
+    ({"x": "eps", "y": "eps"}, "both vary eps"),
+    ({"x_start": -1.0}, "outside"),
+    ({"nx": 100, "ny": 100, "x": "T", "x_start": 1e4, "x_stop": 2e4}, "steps in all"),
+])
+def test_bad_maps_are_a_message_and_the_last_map_stays(tongue, change, needle):
+    s, m = tongue
+    before = m.result
+    m.param.update(**change)
+    m.start()
+    assert m.result is before and not m.running
+    assert s.message.level == "error" and needle in s.message.text, s.message
+    m.param.update(x="alpha", y="eps", x_start=0.5, x_stop=4.5, nx=9, ny=5)
+
+
+def test_the_lease_bounds_the_measured_peak_and_is_given_back(monkeypatch):
+    """The charged particle at small steps (the largest per-step records and 4 x 4 maps): the
+    lease is at least tracemalloc's peak (numpy's arrays included) and at most four times it
+    (its threads' chunks may not all peak at once); it is returned when the map is done (the
+    study keeps its own comparison's lease)."""
+    budget = state.MemoryBudget(cap_bytes=1 << 32)
+    monkeypatch.setattr(state, "BUDGET", budget)
+    leased = []
+    monkeypatch.setattr(budget, "lease", lambda n, what, lease=budget.lease: leased.append(n) or lease(n, what))
+    s = Study(scene="charged")
+    m = StabilityMap(study=s)
+    m.param.update(x="h", x_start=1e-4, x_stop=2e-4, x_log=False, nx=2, y="B0", y_start=0.05, y_stop=0.1, ny=2)
+    s.T = 60.0
+    held = budget.used
+    tracemalloc.start()
+    m.start()
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert m.status.startswith("done") and budget.used == held
+    print(f"stability map: lease {leased[-1] / 1e6:.0f} MB, peak {peak / 1e6:.0f} MB")
+    assert peak <= leased[-1] <= 4 * peak
+    assert math.ceil(60.0 / 1e-4) > state.wp.CHUNK
