@@ -58,6 +58,7 @@ class App(param.Parameterized):
         super().__init__(**params)
         query = pn.state.location.query_params if pn.state.location is not None else {}
         self._pending = []
+        self._stopped = False
         try:
             self.study = Study(**{k: query[u] for k, u in URL_NAMES.items() if u in query})
         except (ValueError, TypeError, InputError) as err:
@@ -97,7 +98,9 @@ class App(param.Parameterized):
 
     def _stop(self, session_context):
         """A closed page stops its background runs (the long run after its current chunk, the
-        measurements before their next run) and gives back the memory of its results."""
+        measurements before their next run) and gives back the memory of its results; nothing
+        is drawn or notified for it any more."""
+        self._stopped = True
         for background in (self.long, self.measure, self.horizons, self.stability):
             background.cancel()
         for derived in (self.study, self.gauges, self.lesson, self.stability):
@@ -108,7 +111,7 @@ class App(param.Parameterized):
             self._notify(event.new.level, event.new.text)
 
     def _notify(self, level, text):
-        if pn.state.notifications is not None:
+        if pn.state.notifications is not None and not self._stopped:
             getattr(pn.state.notifications, level)(text, duration=NOTIFY_MS[level])
 
     def _flush(self):

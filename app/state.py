@@ -255,10 +255,11 @@ class Derived(param.Parameterized):
         self._done = 0
         self._draining = False
         self._lease = None
+        self._closed = False
 
     def _schedule(self):
         self._wanted += 1
-        if not self._draining:
+        if not self._draining and not self._closed:
             self._draining = True
             param.parameterized.async_executor(self._drain)
 
@@ -291,21 +292,29 @@ class Derived(param.Parameterized):
             raise
 
     def _keep(self, lease, result):
-        """Show the result and hold its memory instead of the previous result's."""
+        """Show the result and hold its memory instead of the previous result's (or, once the
+        page is gone, drop it and its memory)."""
+        if self._closed:
+            lease.release()
+            return
         previous, self._lease = self._lease, lease
         if previous is not None:
             previous.release()
         self._apply(result)
 
     def release(self):
-        """Give back the memory of the kept result (the page is gone)."""
+        """The page is gone: give back the memory of the kept result, and drop any result still
+        being computed instead of showing it. (Shown after the session ends, a result would
+        build new plots for its destroyed document, which Panel then keeps for good, and with
+        it the whole session.)"""
+        self._closed = True
         if self._lease is not None:
             self._lease.release()
 
     async def _drain(self):
         self.busy = True
         try:
-            while self._done < self._wanted:
+            while self._done < self._wanted and not self._closed:
                 target = self._wanted
                 leased = self._lease_job()
                 if leased is None:
@@ -705,6 +714,8 @@ class LongRun(param.Parameterized):
                 running = [i for i, a in enumerate(active) if a]
                 outs = await asyncio.gather(*(asyncio.to_thread(long_chunk, setups[i], h, n, *states[i], done,
                                                                 width) for i in running))
+                if self._cancel:
+                    break
                 for i, (red, Z, PT, failure) in zip(running, outs):
                     states[i] = (Z, PT)
                     if red is not None:
@@ -1128,7 +1139,9 @@ class StabilityMap(Background):
         self.param.update(result=result, setting=self._describe(plan))
 
     def release(self):
-        self.result = None
+        """The page is gone: drop the map without redrawing it (see Derived.release)."""
+        with param.parameterized.discard_events(self):
+            self.result = None
 
     def open_cell(self, i, j):
         """Open cell (i along x, j along y) of the last map in the Orbits view: the map's scene,

@@ -4,29 +4,18 @@ Every page load records every request URL (none may leave 127.0.0.1) and every c
 (there must be none), and saves a screenshot to tests/artifacts/.
 """
 import json
-import os
-import pathlib
 import re
 import shutil
-import socket
-import subprocess
-import sys
 import time
-import urllib.request
 from urllib.parse import parse_qs, urlencode, urlparse
 
 import numpy as np
 import pytest
 from playwright.sync_api import expect
+from served import ARTIFACTS, CHROMIUM, CHROMIUM_ARGS, START_TIMEOUT_S, served
 
 from cosymp.scenes import SCENES
 
-ROOT = pathlib.Path(__file__).resolve().parent.parent
-ARTIFACTS = ROOT / "tests" / "artifacts"
-CHROMIUM = os.environ.get("COSYMP_CHROMIUM", "/usr/bin/chromium")
-CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                 "--disable-background-networking", "--disable-component-update", "--disable-sync"]
-START_TIMEOUT_S = 600  # a cold numba cache compiles every kernel first (1-3 min quiet, more under load)
 WAIT_MS = 20_000
 
 pytestmark = [
@@ -35,48 +24,11 @@ pytestmark = [
 ]
 
 
-def free_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @pytest.fixture(scope="module")
 def server():
     """`panel serve app --setup app/warmup.py` on a free port; yields its base URL."""
-    port = free_port()
-    ARTIFACTS.mkdir(exist_ok=True)
-    path = [str(ROOT)] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join(path)}
-    with open(ARTIFACTS / "server.log", "w") as log:
-        proc = subprocess.Popen([sys.executable, "-m", "panel", "serve", "app", "--setup", "app/warmup.py",
-                                 "--address", "127.0.0.1", "--port", str(port),
-                                 "--allow-websocket-origin", f"127.0.0.1:{port}"],
-                                cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT)
-        try:
-            wait_until_serving(proc, port, log.name)
-            yield f"http://127.0.0.1:{port}/app"
-        finally:
-            proc.terminate()
-            try:
-                proc.wait(timeout=15)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait(timeout=15)
-
-
-def wait_until_serving(proc, port, log_name):
-    deadline = time.monotonic() + START_TIMEOUT_S
-    while True:
-        if proc.poll() is not None:
-            pytest.fail(f"panel serve exited with {proc.returncode}; see {log_name}")
-        try:
-            with urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=5):
-                return
-        except OSError:
-            if time.monotonic() > deadline:
-                pytest.fail(f"panel serve did not answer within {START_TIMEOUT_S} s")
-            time.sleep(0.5)
+    with served(ARTIFACTS / "server.log") as (url, _):
+        yield url
 
 
 @pytest.fixture(scope="module")
@@ -268,32 +220,38 @@ def test_theta_lesson_and_shared_link(page):
     page.check()
 
 
-POINT_JS = """([title, solver, k]) => {
-    // Screen position of the k-th point of `solver` in the work-precision plot titled `title`.
+# The Bokeh plot view titled `title` (a walk through every view of the page's documents).
+PLOT_VIEW_JS = """function plotView(title) {
     const roots = Bokeh.index instanceof Map ? [...Bokeh.index.values()] : Object.values(Bokeh.index);
     const seen = new Set();
     let found = null;
     function walk(v) {
         if (!v || seen.has(v) || found) return;
         seen.add(v);
-        if (v.frame && v.renderer_views && v.model.title && v.model.title.text === title) {
-            for (const r of v.renderer_views.values()) {
-                const src = r.model.data_source;
-                const data = !src ? {} : src.data instanceof Map ? Object.fromEntries(src.data) : src.data;
-                if (!("run" in data)) continue;
-                const mine = [...data.solver.keys()].filter(i => data.solver[i] === solver);
-                const i = mine[Math.min(k, mine.length - 1)];
-                const box = v.canvas_view.el.getBoundingClientRect();
-                found = {x: box.left + v.frame.x_scale.compute(data.wall_s[i]),
-                         y: box.top + v.frame.y_scale.compute(data[r.model.glyph.y.field][i]),
-                         run: data.run[i], steps: data.steps[i]};
-            }
-        }
+        if (v.frame && v.renderer_views && v.model.title && v.model.title.text === title) found = v;
         for (const c of (v.child_views ? [...v.child_views] : [])) walk(c);
     }
     for (const r of roots) walk(r);
     return found;
 }"""
+POINT_JS = """([title, solver, k]) => {
+    // Screen position of the k-th point of `solver` in the work-precision plot titled `title`.
+    /*plotView*/
+    const v = plotView(title);
+    if (!v) return null;
+    for (const r of v.renderer_views.values()) {
+        const src = r.model.data_source;
+        const data = !src ? {} : src.data instanceof Map ? Object.fromEntries(src.data) : src.data;
+        if (!("run" in data)) continue;
+        const mine = [...data.solver.keys()].filter(i => data.solver[i] === solver);
+        const i = mine[Math.min(k, mine.length - 1)];
+        const box = v.canvas_view.el.getBoundingClientRect();
+        return {x: box.left + v.frame.x_scale.compute(data.wall_s[i]),
+                y: box.top + v.frame.y_scale.compute(data[r.model.glyph.y.field][i]),
+                run: data.run[i], steps: data.steps[i]};
+    }
+    return null;
+}""".replace("/*plotView*/", PLOT_VIEW_JS)
 WP_TITLE = "relative error at T against wall time"
 
 
@@ -329,21 +287,12 @@ def test_work_precision_measures_a_click_opens_the_point_and_long_horizons_cance
 
 MAP_PIXEL_JS = """([title, x, y]) => {
     // Screen position of data point (x, y) in the plot titled `title`.
-    const roots = Bokeh.index instanceof Map ? [...Bokeh.index.values()] : Object.values(Bokeh.index);
-    const seen = new Set();
-    let found = null;
-    function walk(v) {
-        if (!v || seen.has(v) || found) return;
-        seen.add(v);
-        if (v.frame && v.model.title && v.model.title.text === title) {
-            const box = v.canvas_view.el.getBoundingClientRect();
-            found = {x: box.left + v.frame.x_scale.compute(x), y: box.top + v.frame.y_scale.compute(y)};
-        }
-        for (const c of (v.child_views ? [...v.child_views] : [])) walk(c);
-    }
-    for (const r of roots) walk(r);
-    return found;
-}"""
+    /*plotView*/
+    const v = plotView(title);
+    if (!v) return null;
+    const box = v.canvas_view.el.getBoundingClientRect();
+    return {x: box.left + v.frame.x_scale.compute(x), y: box.top + v.frame.y_scale.compute(y)};
+}""".replace("/*plotView*/", PLOT_VIEW_JS)
 
 
 def test_stability_map_shows_the_mathieu_tongue_and_a_click_opens_the_cell(page):

@@ -329,6 +329,22 @@ def test_long_runs_and_measurements_give_their_memory_back(monkeypatch):
     assert budget.used == 0
 
 
+def test_a_closed_page_draws_nothing_more_and_holds_no_memory(monkeypatch):
+    """After release() (the session was destroyed) a change computes nothing and a result still
+    in flight is dropped with its lease: drawn for a destroyed document, it would keep the whole
+    session alive in Panel's registry of views."""
+    budget = state.MemoryBudget(cap_bytes=1 << 30)
+    monkeypatch.setattr(state, "BUDGET", budget)
+    s = Study()
+    shown = s.results
+    job, lease = s._lease_job()
+    s.release()
+    assert budget.used == lease.nbytes > 0
+    s._keep(lease, s._compute(job))
+    s.values = {"gamma": 0.3}
+    assert s.results is shown and budget.used == 0
+
+
 def test_a_cancelled_long_run_frees_its_chunks_and_its_lease(monkeypatch):
     """The paper's 5e6-step run cancelled at a third, twice (the second is measured: the first
     loads compiled code for good): the lease is given back, and what stays on the heap is the

@@ -1,0 +1,652 @@
+"""Load: ten browser sessions move a slider while an eleventh runs the paper's 5e6-step long run.
+
+`panel serve app` runs on a free 127.0.0.1 port with a small memory cap (COSYMP_MEMORY_CAP_MB=512),
+a short unused-session lifetime (a closed tab's session is destroyed within seconds) and its
+/liveness endpoint. One headless Chromium holds 11 pages, each in its own browser context, driven
+through Playwright's async API (one event loop, the pages work at once):
+
+1. Priming: one default page is opened, closed and its session destroyed; then "idle" RSS and
+   threads are taken (the first page's one-time imports and caches are not per-session costs).
+2. Pages 1..10 open the default app, one after another (a session costs the server ~3 s of its
+   event loop to build; opened all at once, pages connect their websocket after the unused-session
+   lifetime and the server builds each session twice). Page 1 then makes BASELINE_MOVES moves
+   alone: the unloaded latency.
+3. Page 0 opens the preset "Fig. damped: volume form (gamma 2e-4, T 5e5)" (the Long run view,
+   5e6 steps per method) and presses "Start long run".
+4. The load: pages 1..10 at once each move the gamma slider MOVES times (focus its handle, press
+   ArrowRight: +0.01, one recomputation), each move after the previous one settled, bounded by
+   MOVE_TIMEOUT_MS per move and MOVES_WALL_S in all; page 0's progress is read every 2 s.
+5. Refusals, on page 1, while the long run holds its 256 MB lease: a 1.5e6-step comparison
+   (549 MB > the cap: "needs about ... COSYMP_MEMORY_CAP_MB") and a 3e5-step one (330 MB, under
+   the cap but over the 247 MB the long run leaves: "free while other runs hold the rest"); the
+   last good results must stay, RSS must not jump, and a good h then updates the plots.
+6. Clean-up: the long run is cancelled (its Cancel button); the 330 MB comparison refused in 5
+   must now be computed (the cancelled run gave its lease back); all 11 contexts are closed and
+   the server's log (PANEL_LOG_LEVEL=info: "Session <id> launching" / "destroyed") is read until
+   every session is destroyed; then RSS is read every second until it is back within
+   AFTER_MARGIN_MB of idle (Panel collects garbage 5 s after the last destroyed session), for
+   FREE_WAIT_S at most, and the time that took is reported.
+
+Latency is timed inside each page on the page's own clock (performance.now()), so the Python side
+serving 11 pages does not enter it: the move is the keydown event, "update" the first change a
+server patch makes to a ColumnDataSource of the page's Bokeh document after it (the plots got the
+new data), "settled" the session's busy spinner hidden again (every plot of the move delivered).
+This is more reliable than timing websocket frames from Python: the first PATCH-DOC after a move
+is the URL echo of the location sync, which says nothing about the plots, and frame events reach
+a Python loop shared by 11 pages late. A move counts as received when its update arrives; gamma
+in the page's URL (the server's state) must end at 0.2 + 0.01 x presses.
+
+Memory and threads: VmRSS and Threads of the server from /proc/<pid>/status every 0.2 s (no
+psutil); server and machine CPU from /proc; event-loop lag as the time /liveness takes to answer.
+The server runs with MALLOC_MMAP_THRESHOLD_=1 MiB: glibc then maps every block of 1 MiB or more on
+its own and unmaps it when freed (by default it raises that threshold to the largest block freed,
+up to 32 MiB, and keeps later frees in its heaps), so a closed session's arrays leave RSS and RSS
+measures what is live rather than what the allocator caches.
+
+Bounds, from runs on 2 shared cores (another suite's server and Chromium often running too):
+* Cap 512 MB, not 1 GB: the live views refuse more than 2e6 steps and cosymp records at most 2e7
+  values per run, so the largest comparison a page can ask for leases 549 MB (610 MB for the
+  charged particle): no single request can pass 1 GB. With 512 MB the long run (256 MB) and the
+  ten sessions (0.55 MB each) fit and both refusals can be asked for.
+* p95 update latency < P95_BOUND_S = 40 s. One session alone: 0.25-0.6 s. Loaded, p95 was
+  15-31 s (p50 4.6-9 s): every update costs the server ~1 s of its single event loop (rendering
+  three plots), ten sessions and the long run queue there, and Chromium's 11 renderers take most
+  of the two cores. 40 s is ~1.5x the worst p95 seen; a starved session (waiting for the long
+  run, minutes) or lost updates (MOVE_TIMEOUT_MS) go far past it.
+* Peak RSS - idle < the cap (observed 240-480 MB).
+* After close: threads <= idle + EXECUTOR_THREADS (the asyncio default executor's workers,
+  min(32, cpu + 4), are created on demand and reused by every session: not per-session); RSS - idle
+  < AFTER_MARGIN_MB = cap / 2 within FREE_WAIT_S. Measured: back within the margin 11 s after the
+  last session was destroyed (RSS 557 MB against 302 idle: small-object heaps the allocator keeps).
+  Before, every closed session stayed alive (RSS 730-780 MB): Panel's EditableFloatSlider sits
+  in a global link registry for good. A fixed 8 s wait also read RSS before Panel's collection
+  had freed the last page's 330 MB comparison (its objects are cycles): hence the polling.
+
+Everything measured goes to tests/artifacts/load.json and to stdout (run pytest with -s).
+"""
+import asyncio
+import itertools
+import json
+import os
+import re
+import shutil
+import statistics
+import threading
+import time
+import urllib.request
+from urllib.parse import parse_qs, urlparse
+
+import pytest
+from playwright.async_api import TimeoutError as PlaywrightTimeout
+from served import ARTIFACTS, CHROMIUM, CHROMIUM_ARGS, START_TIMEOUT_S, served
+
+SERVER_LOG = ARTIFACTS / "load-server.log"
+
+CAP_MB = 512
+SESSION_LIFETIME_MS = 5_000    # longer than a page takes from its HTML to its websocket here
+CHECK_UNUSED_MS = 500
+SLIDER_PAGES = 10
+MOVES = 5
+BASELINE_MOVES = 3
+HANDLE_START = "0.2"           # gamma's slider handle (aria-valuenow, one decimal) on the default page
+MOVE_TIMEOUT_MS = 60_000       # per move, for its update and again for its settling
+MOVES_WALL_S = 150             # no move starts after this many seconds of the slider phase
+LOAD_TIMEOUT_MS = 90_000
+SAMPLE_S = 0.2
+DESTROY_TIMEOUT_S = 45
+P95_BOUND_S = 40.0
+FREE_WAIT_S = 60               # RSS is read every second until it is back within the margin, this long at most
+LONG_STALL_S = 60              # longest time the long run's progress (1% steps) may stand still
+AFTER_MARGIN_MB = CAP_MB // 2
+REFUSAL_JUMP_MB = 100
+REFUSAL_T = 300.0
+OVER_CAP_H = 0.0002            # 1.5e6 steps: 549 MB, over the cap
+OVER_FREE_H = 0.001            # 3e5 steps: 330 MB, under the cap, over what the long run leaves free
+GOOD_H = 0.05
+EXECUTOR_THREADS = min(32, (os.cpu_count() or 1) + 4)
+
+pytestmark = [
+    pytest.mark.skipif(not shutil.which(CHROMIUM), reason=f"no Chromium at {CHROMIUM} (apt-get install it)"),
+    pytest.mark.timeout(START_TIMEOUT_S + 300),
+]
+
+
+TICK = os.sysconf("SC_CLK_TCK")
+
+
+def cpu_seconds(pid):
+    """CPU seconds (user + system) the process has used, from /proc/<pid>/stat."""
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / TICK
+
+
+def machine_busy():
+    """(busy, total) CPU ticks of the whole machine since boot, from /proc/stat."""
+    with open("/proc/stat") as f:
+        ticks = [int(x) for x in f.readline().split()[1:]]
+    idle = ticks[3] + ticks[4]
+    return sum(ticks) - idle, sum(ticks)
+
+
+def proc_status(pid):
+    """(RSS in MB, thread count) of a process, from /proc/<pid>/status."""
+    rss = threads = None
+    with open(f"/proc/{pid}/status") as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                rss = int(line.split()[1]) / 1024
+            elif line.startswith("Threads:"):
+                threads = int(line.split()[1])
+    return rss, threads
+
+
+class Sampler(threading.Thread):
+    """Samples (monotonic time, RSS MB, threads) of a process every SAMPLE_S until stopped."""
+
+    def __init__(self, pid):
+        super().__init__(daemon=True, name="load-sampler")
+        self.pid = pid
+        self.samples = []
+        self.halt = threading.Event()
+
+    def run(self):
+        while not self.halt.is_set():
+            try:
+                rss, threads = proc_status(self.pid)
+            except (OSError, ValueError):
+                return
+            self.samples.append((time.monotonic(), rss, threads))
+            self.halt.wait(SAMPLE_S)
+
+    def between(self, t0, t1=None):
+        t1 = time.monotonic() if t1 is None else t1
+        return [s for s in list(self.samples) if t0 <= s[0] <= t1]
+
+    def cpu(self):
+        """(monotonic time, server CPU seconds, machine busy ticks, machine total ticks) now."""
+        return (time.monotonic(), cpu_seconds(self.pid), *machine_busy())
+
+    @staticmethod
+    def usage(a, b):
+        """Between two cpu() readings: the server's CPU use in cores, and the machine's busy fraction."""
+        return {"server_cores": round((b[1] - a[1]) / (b[0] - a[0]), 2),
+                "machine_busy": round((b[2] - a[2]) / max(1, b[3] - a[3]), 2)}
+
+    def peak(self, t0, t1=None):
+        """(max RSS, max threads) over [t0, t1]."""
+        window = self.between(t0, t1)
+        return max(s[1] for s in window), max(s[2] for s in window)
+
+    def settled(self, seconds=1.5):
+        """(median RSS, max threads) over the last `seconds` (waits for them to pass)."""
+        t0 = time.monotonic()
+        time.sleep(seconds)
+        window = self.between(t0)
+        return statistics.median(s[1] for s in window), max(s[2] for s in window)
+
+
+class LoopProbe(threading.Thread):
+    """GETs the server's /liveness (answered by the event loop without any work) every 0.5 s and
+    records (monotonic time, seconds to answer): how long the loop was busy before it could."""
+
+    def __init__(self, url):
+        super().__init__(daemon=True, name="load-loop-probe")
+        self.url = url
+        self.lags = []
+        self.halt = threading.Event()
+
+    def run(self):
+        while not self.halt.is_set():
+            t0 = time.monotonic()
+            try:
+                with urllib.request.urlopen(self.url, timeout=60) as answer:
+                    answer.read()
+            except OSError:
+                pass
+            else:
+                self.lags.append((t0, time.monotonic() - t0))
+            self.halt.wait(0.5)
+
+    def between(self, t0, t1):
+        return [lag for t, lag in list(self.lags) if t0 <= t <= t1]
+
+
+class Sessions:
+    """Counts the sessions Panel logs as launched and destroyed (PANEL_LOG_LEVEL=info)."""
+
+    def __init__(self, log_path):
+        self.log_path = log_path
+
+    def counts(self):
+        text = self.log_path.read_text(errors="replace")
+        return (len(set(re.findall(r"Session (\d+) launching", text))),
+                len(set(re.findall(r"Session (\d+) destroyed", text))))
+
+    def live(self):
+        launched, destroyed = self.counts()
+        return launched - destroyed
+
+    def wait_all_destroyed(self, timeout_s=DESTROY_TIMEOUT_S):
+        """Seconds until no session is live, or None if some still are after timeout_s."""
+        t0 = time.monotonic()
+        while self.live() > 0:
+            if time.monotonic() - t0 > timeout_s:
+                return None
+            time.sleep(0.25)
+        return time.monotonic() - t0
+
+
+@pytest.fixture(scope="module")
+def server():
+    """`panel serve app --setup app/warmup.py` with the small cap; yields (base URL, pid)."""
+    env = {"COSYMP_MEMORY_CAP_MB": str(CAP_MB), "PANEL_LOG_LEVEL": "info", "PYTHONUNBUFFERED": "1",
+           "MALLOC_MMAP_THRESHOLD_": str(1 << 20)}
+    options = ["--check-unused-sessions", str(CHECK_UNUSED_MS), "--unused-session-lifetime", str(SESSION_LIFETIME_MS)]
+    with served(SERVER_LOG, env, options) as url_pid:
+        yield url_pid
+
+
+# In-page instrumentation: keydown times, and the times of Bokeh document changes that matter.
+INSTRUMENT_JS = """() => {
+    const L = window.__load = {keys: [], cds: [], settled: [], slider: []};
+    document.addEventListener("keydown", () => L.keys.push(performance.now()), true);
+    for (const doc of Bokeh.documents) doc.on_change((ev) => {
+        const m = ev.model;
+        if (!m) return;
+        const t = performance.now();
+        if (m.type === "ColumnDataSource") L.cds.push(t);
+        else if (m.type === "Slider" && ev.attr === "value") L.slider.push([t, m.value]);
+        else if (ev.attr === "visible" && m.visible === false && (m.css_classes || []).includes("loader"))
+            L.settled.push(t);
+    });
+    return Bokeh.documents.length;
+}"""
+# [ms from the k-th keydown to the first plot-data change after it] once there is one, else null.
+UPDATE_JS = """(k) => {
+    const L = window.__load;
+    if (L.keys.length <= k) return null;
+    const t0 = L.keys[k], u = L.cds.find((t) => t > t0);
+    return u === undefined ? null : [u - t0];
+}"""
+# [ms from the k-th keydown to the spinner being hidden after the first plot-data change].
+SETTLED_JS = """(k) => {
+    const L = window.__load, t0 = L.keys[k], u = L.cds.find((t) => t > t0);
+    const s = u === undefined ? undefined : L.settled.find((t) => t >= u);
+    return s === undefined ? null : [s - t0];
+}"""
+CDS_COUNT_JS = "() => window.__load.cds.length"
+# The slider's value changes after the k-th keydown ([ms after it, value]).
+SLIDER_AFTER_JS = """(k) => {
+    const L = window.__load, t0 = L.keys[k];
+    return L.slider.filter(([t]) => t > t0).map(([t, v]) => [Math.round(t - t0), v]);
+}"""
+# [ms from t0 to the first plot-data change after it].
+AFTER_JS = """(t0) => {
+    const u = window.__load.cds.find((t) => t > t0);
+    return u === undefined ? null : [u - t0];
+}"""
+NOW_JS = "() => performance.now()"
+
+
+SENT = {}  # page -> the text frames it sent on its websocket
+OUTSIDE = []  # requests of any page that did not go to 127.0.0.1
+LOCAL = ("http://127.0.0.1:", "ws://127.0.0.1:", "data:", "blob:")
+
+
+async def new_page(browser, url, ready):
+    """A page in its own context, opened at url, with `ready` (a selector) shown; (context, page, seconds)."""
+    t0 = time.monotonic()
+    context = await browser.new_context(viewport={"width": 1400, "height": 1600})
+    page = await context.new_page()
+    page.set_default_timeout(LOAD_TIMEOUT_MS)
+    sent = SENT[page] = []
+    page.on("request", lambda req: req.url.startswith(LOCAL) or OUTSIDE.append(req.url))
+    page.on("websocket", lambda ws: ws.on("framesent", lambda data: sent.append(data if isinstance(data, str) else "")))
+    await page.goto(url, wait_until="load")
+    await page.wait_for_selector(ready)
+    await page.wait_for_function("() => window.Bokeh && Bokeh.documents.length > 0")
+    await page.evaluate(INSTRUMENT_JS)
+    return context, page, time.monotonic() - t0
+
+
+async def move_slider(page, moves, deadline):
+    """Press ArrowRight on the gamma slider `moves` times (one step of 0.01 each), each after the
+    previous move settled; returns per-move update/settled latencies (s), moves made, lost
+    updates, all presses so far on the page and gamma in its URL at the end."""
+    values = await page.locator(".noUi-handle").evaluate_all("hs => hs.map(h => h.getAttribute('aria-valuenow'))")
+    handle = page.locator(".noUi-handle").nth(values.index(HANDLE_START))
+    out = {"update_s": [], "settled_s": [], "made": 0, "lost": [], "unsettled": []}
+    first = await page.evaluate("() => window.__load.keys.length")
+    for k in range(first, first + moves):
+        if time.monotonic() > deadline:
+            break
+        await handle.press("ArrowRight")
+        out["made"] += 1
+        try:
+            got = await page.wait_for_function(UPDATE_JS, arg=k, polling=100, timeout=MOVE_TIMEOUT_MS)
+            out["update_s"].append((await got.json_value())[0] / 1000)
+        except PlaywrightTimeout as err:  # a lost update is a finding: recorded, asserted on later
+            moved = await page.evaluate(SLIDER_AFTER_JS, k)
+            sent = [v for _, v in moved if any(f'"new":{json.dumps(v)}' in f for f in SENT[page])]
+            out["lost"].append(f"move {k}: {type(err).__name__}: {str(err)[:60]}; slider values after the "
+                               f"keydown: {moved}; sent to the server: {sent}; gamma in the URL: {url_gamma(page.url)}")
+            continue
+        try:
+            got = await page.wait_for_function(SETTLED_JS, arg=k, polling=100, timeout=MOVE_TIMEOUT_MS)
+            out["settled_s"].append((await got.json_value())[0] / 1000)
+        except PlaywrightTimeout as err:
+            out["unsettled"].append(f"move {k}: {type(err).__name__}: {str(err)[:120]}")
+    out["presses"] = first + out["made"]
+    out["gamma"] = url_gamma(page.url)
+    return out
+
+
+def url_gamma(url):
+    """gamma in the page's URL (the app writes its state there; the slider shows one decimal)."""
+    values = parse_qs(urlparse(url).query).get("p", ["{}"])[0]
+    return json.loads(values).get("gamma", 0.2)
+
+
+async def watch_progress(page, stop):
+    """(seconds, progress %, status line) of the long run every 2 s until stop is set."""
+    t0 = time.monotonic()
+    seen = []
+    while not stop.is_set():
+        value = await page.locator("progress").first.get_attribute("value")
+        status = await long_status(page)
+        seen.append((round(time.monotonic() - t0, 1), int(value or 0), status))
+        try:
+            await asyncio.wait_for(stop.wait(), 2.0)
+        except TimeoutError:
+            pass
+    return seen
+
+
+async def long_status(page):
+    """The long run's status line (running, cancelled at ..., done: ...)."""
+    return await page.locator("p.doc:has-text('h = 0.1') b").first.inner_text()
+
+
+async def accept_after_cancel(page, sampler):
+    """Ask page again for the comparison that was refused while the long run held its lease (it
+    fits once the cancelled run gave the lease back); returns its header and the RSS around it."""
+    from playwright.async_api import expect
+
+    before, _ = proc_status(sampler.pid)
+    await enter(page, 0, OVER_FREE_H)
+    want = f"h = {OVER_FREE_H:g}, T = {REFUSAL_T:g}"
+    try:
+        await expect(header(page)).to_contain_text(want, timeout=MOVE_TIMEOUT_MS)
+    except AssertionError:
+        pass
+    shown = await header(page).inner_text()
+    with_big, _ = await asyncio.to_thread(sampler.settled, 1.5)
+    return {"accepted": want in shown, "header": shown.split("\t")[0], "rss_before_mb": round(before),
+            "rss_with_it_mb": round(with_big)}
+
+
+async def enter(page, index, value):
+    """Type value into the index-th sidebar number input (0: h, 1: T) and press Enter."""
+    box = page.locator("input.bk-input").nth(index)
+    await box.fill(str(value))
+    await box.press("Enter")
+
+
+async def toast(page, *texts):
+    """The text of the notification that contains all of texts (waits for it)."""
+    loc = page.locator(".notyf__toast")
+    for t in texts:
+        loc = loc.filter(has_text=t)
+    await loc.first.wait_for(timeout=MOVE_TIMEOUT_MS)
+    return await loc.first.inner_text()
+
+
+def header(page):
+    return page.locator("table.numbers tr").first
+
+
+async def refusals(page, sampler, long_running):
+    """On page: a good horizon, then a comparison over the cap (refused), then, while the long run
+    holds its lease, one under the cap but over what is free (refused), then a good step again
+    (computed). Returns the texts, the RSS around the refusals and the good value's latency."""
+    from playwright.async_api import expect
+
+    from app.state import comparison_bytes
+    from cosymp.integrate import Setup
+
+    setups = [Setup.make("damped", m) for m in ("midpoint", "rk4")]
+    out = {"over_cap_request_mb": round(comparison_bytes(setups, OVER_CAP_H, REFUSAL_T) / 2**20, 1),
+           "free_request_mb": round(comparison_bytes(setups, OVER_FREE_H, REFUSAL_T) / 2**20, 1)}
+    await enter(page, 1, REFUSAL_T)
+    await expect(header(page)).to_contain_text(f"h = 0.1, T = {REFUSAL_T:g}", timeout=MOVE_TIMEOUT_MS)
+    t0 = time.monotonic()
+    base_rss, _ = proc_status(sampler.pid)
+    await enter(page, 0, OVER_CAP_H)
+    out["over_cap_text"] = await toast(page, "needs about", "COSYMP_MEMORY_CAP_MB")
+    out["free_text"] = None
+    if long_running:  # without the long run's lease this request would be computed
+        await enter(page, 0, OVER_FREE_H)
+        out["free_text"] = await toast(page, "needs about", "free while other runs hold the rest")
+    await asyncio.sleep(1.0)
+    out["kept_last_good"] = f"h = 0.1, T = {REFUSAL_T:g}" in await header(page).inner_text()
+    peak, _ = sampler.peak(t0)
+    out["rss_before_mb"], out["rss_peak_during_mb"] = round(base_rss), round(peak)
+    sent = await page.evaluate(NOW_JS)
+    await enter(page, 0, GOOD_H)
+    await expect(header(page)).to_contain_text(f"h = {GOOD_H:g}, T = {REFUSAL_T:g}", timeout=MOVE_TIMEOUT_MS)
+    got = await page.wait_for_function(AFTER_JS, arg=sent, polling=100, timeout=MOVE_TIMEOUT_MS)
+    out["good_value_update_s"] = round((await got.json_value())[0] / 1000, 3)
+    return out
+
+
+async def scenario(base, sampler, sessions, probe=None):
+    """The whole load run; returns the figures (asserted by the tests below)."""
+    from playwright.async_api import async_playwright
+
+    from app.presets import PRESETS
+    from app.state import LONG_URL_NAMES, URL_NAMES
+
+    preset = next(p for p in PRESETS if p.name == "Fig. damped: volume form (gamma 2e-4, T 5e5)")
+    r = {"loadavg_at_start": os.getloadavg(), "cap_mb": CAP_MB, "slider_pages": SLIDER_PAGES, "moves_per_page": MOVES,
+         "session_lifetime_ms": SESSION_LIFETIME_MS}
+    t_start = time.monotonic()
+    async with async_playwright() as p:
+        browser = await p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, timeout=60_000)
+        try:
+            # Priming: the first page's one-time costs, then idle.
+            context, _, _ = await new_page(browser, base, "table.numbers")
+            await context.close()
+            r["priming_destroyed_s"] = await asyncio.to_thread(sessions.wait_all_destroyed)
+            rss, threads = await asyncio.to_thread(sampler.settled)
+            r["idle"] = {"rss_mb": round(rss, 1), "threads": threads}
+            t_idle = time.monotonic()
+
+            # Pages 1..10, opened one after another: a page whose websocket connects later than the
+            # unused-session lifetime after its HTML gets a second session built (a server-side
+            # session costs ~3 s of the event loop; ten opened at once take ~50 s to connect).
+            opened = []
+            for _ in range(SLIDER_PAGES):
+                opened.append(await new_page(browser, base, "table.numbers"))
+            r["page_load_s"] = [round(s, 2) for _, _, s in opened]
+            r["live_sessions_after_open"] = sessions.live()
+
+            # Unloaded baseline: BASELINE_MOVES on page 1 alone.
+            r["baseline"] = await move_slider(opened[0][1], BASELINE_MOVES, time.monotonic() + MOVES_WALL_S)
+            r["latency_baseline_s"] = summary(r["baseline"]["update_s"])
+
+            # Page 0: the long run.
+            long_ctx, long_page, _ = await new_page(browser, base + preset.query(URL_NAMES, LONG_URL_NAMES),
+                                                    "button:has-text('Start long run')")
+            await long_page.locator("button", has_text="Start long run").click()
+            await long_page.get_by_text("running").first.wait_for()
+            stop = asyncio.Event()
+            progress_task = asyncio.create_task(watch_progress(long_page, stop))
+
+            # The load: the ten pages move their sliders at once while the long run runs.
+            t_moves = time.monotonic()
+            cpu_moves = sampler.cpu()
+            long_plots = await long_page.evaluate(CDS_COUNT_JS)
+            deadline = t_moves + MOVES_WALL_S
+            results = await asyncio.gather(*[move_slider(pg, MOVES, deadline) for _, pg, _ in opened])
+            t_moved = time.monotonic()
+            r["moves_wall_s"] = round(t_moved - t_moves, 1)
+            r["cpu_during_moves"] = sampler.usage(cpu_moves, sampler.cpu())
+            r["long_page_plot_updates_during_moves"] = await long_page.evaluate(CDS_COUNT_JS) - long_plots
+            if probe is not None:
+                r["loop_lag_idle_s"] = summary(probe.between(t_idle - 2, t_idle))
+                r["loop_lag_during_moves_s"] = summary(probe.between(t_moves, t_moved))
+            r["pages"] = results
+            updates = [x for res in results for x in res["update_s"]]
+            settled = [x for res in results for x in res["settled_s"]]
+            r["latency_update_s"] = summary(updates)
+            r["latency_settled_s"] = summary(settled)
+            r["peak_during_load"] = dict(zip(("rss_mb", "threads"), map(round, sampler.peak(t_moves))))
+
+            # The refusals, on page 1, while the long run holds its lease.
+            status = await long_status(long_page)
+            r["long_status_before_refusals"] = status
+            r["refusal"] = await refusals(opened[0][1], sampler, long_running=status == "running")
+
+            # Clean-up: cancel the long run, close every page.
+            stop.set()
+            r["long_progress"] = await progress_task
+            t_cancel = time.monotonic()
+            await long_page.locator("button", has_text="Cancel").click()
+            await long_page.get_by_text("cancelled at t =").first.wait_for(timeout=15_000)
+            r["cancel_s"] = round(time.monotonic() - t_cancel, 2)
+            r["cancel_status"] = await long_status(long_page)
+            rss, threads = await asyncio.to_thread(sampler.settled, 2.0)
+            r["after_cancel"] = {"rss_mb": round(rss, 1), "threads": threads}
+            r["after_cancel_request"] = await accept_after_cancel(opened[0][1], sampler)
+            r["peak"] = dict(zip(("rss_mb", "threads"), map(round, sampler.peak(t_idle))))
+            t_close = time.monotonic()
+            for context, _, _ in opened:
+                await context.close()
+            await long_ctx.close()
+        finally:
+            await browser.close()
+    r["t_close"], r["t_start"] = t_close, t_start
+    r["requests_outside_loopback"] = sorted(set(OUTSIDE))
+    return r
+
+
+def after_close(r, sampler, sessions):
+    """Wait (bounded) for every session to be destroyed, then the settled figures."""
+    r["destroyed_s"] = sessions.wait_all_destroyed()
+    t_close, t_start = r.pop("t_close"), r.pop("t_start")
+    r["destroyed_after_close_s"] = round(time.monotonic() - t_close, 1)
+    launched, destroyed = sessions.counts()
+    r["sessions"] = {"launched": launched, "destroyed": destroyed, "pages_opened": SLIDER_PAGES + 2}
+    idle = r["idle"]["rss_mb"]
+    waited = time.monotonic()
+    while True:
+        rss, threads = sampler.settled(1.0)
+        if rss - idle < AFTER_MARGIN_MB or time.monotonic() - waited > FREE_WAIT_S:
+            break
+    r["after_close"] = {"rss_mb": round(rss, 1), "threads": threads,
+                        "freed_after_destroyed_s": round(time.monotonic() - waited, 1)}
+    r["total_s"] = round(time.monotonic() - t_start, 1)
+    r["loadavg_at_end"] = os.getloadavg()
+
+
+def summary(xs):
+    if not xs:
+        return {"n": 0}
+    q = statistics.quantiles(xs, n=20, method="inclusive") if len(xs) > 1 else [xs[0]] * 19
+    return {"n": len(xs), "p50": round(statistics.median(xs), 3), "p95": round(q[18], 3), "max": round(max(xs), 3)}
+
+
+@pytest.fixture(scope="module")
+def load(server):
+    base, pid = server
+    sampler = Sampler(pid)
+    probe = LoopProbe(base.rsplit("/", 1)[0] + "/liveness")
+    sampler.start()
+    probe.start()
+    try:
+        sessions = Sessions(SERVER_LOG)
+        r = asyncio.run(scenario(base, sampler, sessions, probe))
+        after_close(r, sampler, sessions)
+    finally:
+        sampler.halt.set()
+        probe.halt.set()
+        sampler.join(timeout=5)
+        probe.join(timeout=65)
+    r["loop_lag_all_s"] = summary([lag for _, lag in probe.lags])
+    r["rss_series"] = [(round(t - sampler.samples[0][0], 1), round(m), n) for t, m, n in sampler.samples[::5]]
+    (ARTIFACTS / "load.json").write_text(json.dumps(r, indent=1))
+    lat, done = r["latency_update_s"], r["latency_settled_s"]
+    print(f"\nload: {SLIDER_PAGES} sessions x {MOVES} moves while a 5e6-step long run runs; "
+          f"update latency p50 {lat.get('p50')} s, p95 {lat.get('p95')} s, max {lat.get('max')} s (n = {lat['n']}); "
+          f"settled p50 {done.get('p50')} s, p95 {done.get('p95')} s, max {done.get('max')} s")
+    lag = r.get("loop_lag_during_moves_s", {})
+    print(f"load: event-loop lag during the moves (/liveness answer time) p50 {lag.get('p50')} s, "
+          f"p95 {lag.get('p95')} s, max {lag.get('max')} s; CPU during the moves {r['cpu_during_moves']}")
+    alone = r["latency_baseline_s"]
+    print(f"load: one session alone (before the long run): update p50 {alone.get('p50')} s, max {alone.get('max')} s; "
+          f"page loads {min(r['page_load_s'])}-{max(r['page_load_s'])} s")
+    print(f"load: RSS idle {r['idle']['rss_mb']} MB, peak {r['peak']['rss_mb']} MB, after cancel "
+          f"{r['after_cancel']['rss_mb']} MB, after close {r['after_close']['rss_mb']} MB "
+          f"({r['after_close']['freed_after_destroyed_s']} s after the last session was destroyed; cap {CAP_MB} MB); "
+          f"threads idle {r['idle']['threads']}, peak {r['peak']['threads']}, after close {r['after_close']['threads']}")
+    print(f"load: after the cancel the refused 330 MB comparison {r['after_cancel_request']}")
+    print(f"load: refusals {r['refusal'].get('free_text')!r} / {r['refusal'].get('over_cap_text')!r}; "
+          f"sessions {r['sessions']}, destroyed {r['destroyed_s']} s after close; total {r['total_s']} s")
+    return r
+
+
+def test_every_session_received_an_update_for_every_move(load):
+    lost = {i + 1: res["lost"] for i, res in enumerate(load["pages"]) if res["lost"]}
+    short = {i + 1: res["made"] for i, res in enumerate(load["pages"]) if res["made"] < MOVES}
+    unsettled = {i + 1: res["unsettled"] for i, res in enumerate(load["pages"]) if res["unsettled"]}
+    assert not short, f"moves made within {MOVES_WALL_S} s: {short}"
+    assert not lost, lost
+    assert not unsettled, unsettled
+    assert load["latency_update_s"]["n"] == SLIDER_PAGES * MOVES
+    gammas = [(res["gamma"], 0.2 + 0.01 * res["presses"]) for res in load["pages"]]
+    assert all(abs(got - want) < 1e-9 for got, want in gammas), gammas
+
+
+def test_every_request_stayed_on_the_loopback(load):
+    assert load["requests_outside_loopback"] == []
+
+
+def test_p95_latency_is_bounded(load):
+    assert load["latency_update_s"]["p95"] < P95_BOUND_S, load["latency_update_s"]
+
+
+def test_the_long_run_kept_progressing_during_the_load(load):
+    seen = load["long_progress"]
+    rose = [seen[0][0]] + [b[0] for a, b in itertools.pairwise(seen) if b[1] > a[1]] + [seen[-1][0]]
+    longest = max(b - a for a, b in itertools.pairwise(rose))
+    assert seen[-1][1] > seen[0][1] and longest < LONG_STALL_S, (longest, seen)
+    assert load["long_page_plot_updates_during_moves"] > 0
+    assert load["long_status_before_refusals"] == "running"
+    assert load["cancel_status"].startswith("cancelled at t ="), load["cancel_status"]
+    assert load["cancel_s"] < 10, load["cancel_s"]
+
+
+def test_a_cancelled_run_gives_its_memory_lease_back(load):
+    again = load["after_cancel_request"]
+    assert again["accepted"], again
+
+
+def test_memory_stays_under_the_cap(load):
+    assert load["peak"]["rss_mb"] - load["idle"]["rss_mb"] < CAP_MB, (load["idle"], load["peak"])
+
+
+def test_a_request_over_the_cap_is_refused_and_the_page_still_works(load):
+    ref = load["refusal"]
+    assert ref["over_cap_request_mb"] > CAP_MB > ref["free_request_mb"]
+    assert f"needs about {ref['over_cap_request_mb']:.0f} MB" in ref["over_cap_text"] and f"cap of {CAP_MB} MB" in ref["over_cap_text"]
+    assert ref["free_text"] is not None and f"needs about {ref['free_request_mb']:.0f} MB" in ref["free_text"]
+    assert ref["kept_last_good"]
+    assert ref["rss_peak_during_mb"] - ref["rss_before_mb"] < REFUSAL_JUMP_MB, ref
+    assert ref["good_value_update_s"] < MOVE_TIMEOUT_MS / 1000
+
+
+def test_closed_pages_free_their_sessions_threads_and_memory(load):
+    assert load["destroyed_s"] is not None, f"sessions still live {DESTROY_TIMEOUT_S} s after the pages closed"
+    assert load["after_close"]["threads"] <= load["idle"]["threads"] + EXECUTOR_THREADS, load["after_close"]
+    assert load["after_close"]["rss_mb"] - load["idle"]["rss_mb"] < AFTER_MARGIN_MB, (load["idle"], load["after_close"])
