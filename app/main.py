@@ -6,6 +6,7 @@ template, KaTeX and BokehJS come from Panel's and Bokeh's bundled resources.
 """
 import html
 import io
+import weakref
 from functools import partial
 from pathlib import Path
 
@@ -17,6 +18,8 @@ from cosymp.errors import InputError, RunError
 
 from .presets import query_items
 from .state import (
+    FREED,
+    LOG,
     LONG_URL_NAMES,
     URL_NAMES,
     VIEWS,
@@ -59,6 +62,7 @@ class App(param.Parameterized):
         query = pn.state.location.query_params if pn.state.location is not None else {}
         self._pending = []
         self._stopped = False
+        weakref.finalize(self, LOG.info, FREED)
         try:
             self.study = Study(**{k: query[u] for k, u in URL_NAMES.items() if u in query})
         except (ValueError, TypeError, InputError) as err:

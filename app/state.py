@@ -14,6 +14,7 @@ says what to change, and the last good results stay.
 """
 import asyncio
 import dataclasses
+import logging
 import math
 import os
 import threading
@@ -67,6 +68,10 @@ LONG_CHUNK_SECONDS = 0.3
 # a comparison peaks at <= 39 bytes per value its runs record (damped 39, charged 31, kapitza
 # 28), a long run at 179 MB (chunked, any horizon), a work-precision measurement at 43 MB and
 # long horizons at 29 MB.
+# Logged (under Panel's logger: PANEL_LOG_LEVEL=info shows it beside Panel's session lines) when
+# a page's App is garbage-collected, so an operator (and the load test) can see closed pages freed.
+LOG = logging.getLogger("panel.cosymp")
+FREED = "cosymp: a page's state was freed"
 MEMORY_CAP_MB = float(os.environ.get("COSYMP_MEMORY_CAP_MB", "4096"))
 BYTES_PER_RECORDED = 48
 LONG_RUN_BYTES = 256 << 20
