@@ -13,8 +13,9 @@ import time
 def warm():
     """Run every method on every scene it applies to (a few steps, with the tangent maps, the
     carried loop and the exact flow that compare() uses; one work-precision point, scipy's
-    solvers and one long-horizon point), the gauge study, and import the plotting modules the
-    pages use. Returns the wall time in seconds."""
+    solvers and one long-horizon point, one stability-map point), the gauge study, and import the
+    plotting modules the pages use. Returns the wall time in seconds."""
+    from cosymp import sweep
     from cosymp import workprecision as wp
     from cosymp.integrate import Setup
     from cosymp.methods import METHODS
@@ -29,6 +30,7 @@ def warm():
         measured = [m for m in methods if m != "exact"]
         wp.measure(scene.name, measured, T=4 * scene.h, hs=[scene.h], peers=True, rtols=(1e-3,), budget=0.0)
         wp.drift(scene.name, measured, h=scene.h, horizons=[2 * scene.h])
+        sweep.figures(Setup.make(scene, measured[0]), scene.h, 4 * scene.h, sweep.MEASURES)
     gauge_study("midpoint", {}, SCENES["charged"].h, 10 * SCENES["charged"].h)
     for module in ("holoviews.plotting.bokeh", "holoviews.operation.downsample", "tsdownsample"):
         importlib.import_module(module)
