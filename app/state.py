@@ -1094,14 +1094,8 @@ class StabilityMap(Background):
         self._on_scene()
         self.study.param.watch(self._on_scene, ["scene", "method"])
 
-    def names(self):
-        """What can be varied: the scene's numeric parameters, h, T and (theta methods) θ."""
-        s = self.study
-        numeric = [p.name for p in s.scene_obj.params if not p.choices and not isinstance(p.default, str)]
-        return numeric + ["h", "T"] + (["theta"] if METHODS[s.method].takes_theta else [])
-
     def _on_scene(self, *events):
-        names = self.names()
+        names = sweep.variables(self.study.scene_obj, METHODS[self.study.method])
         self.param.x.objects = self.param.y.objects = names
         if events and all(e.name == "method" for e in events) and {self.x, self.y} <= set(names):
             return
@@ -1119,15 +1113,15 @@ class StabilityMap(Background):
         run = {k: None if k in varied else v for k, v in
                (("theta", theta_for(s.method, s.theta)), ("h", s.h), ("T", s.T))}
         plan = sweep.plan(s.scene, s.method, axes, (self.measure,), fixed, **run)
-        steps = sum(check_step(*plan.run_of(plan.point(i))[1:]) for i in range(plan.size))
+        counts, shared = plan.step_counts()
+        steps = int(counts.sum()) * shared
         if steps > MAP_MAX_STEPS:
             raise InputError(f"this map takes {steps:.3g} steps in all, beyond this view's {MAP_MAX_STEPS:.0e}: "
                              "use fewer cells, larger h or a shorter T (or run `cosymp sweep` on a cluster)")
         return plan
 
     def _bytes(self, plan):
-        most = max(check_step(*plan.run_of(plan.point(i))[1:]) for i in (0, plan.size - 1))
-        return map_bytes(SCENES[plan.scene], most, os.cpu_count() or 1)
+        return map_bytes(SCENES[plan.scene], int(plan.step_counts()[0].max()), os.cpu_count() or 1)
 
     def _describe(self, plan):
         (ax, ay) = plan.axes

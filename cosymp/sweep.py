@@ -121,6 +121,14 @@ class Plan:
         idx = np.unravel_index(index, self.shape)
         return {a.name: a.values[i] for a, i in zip(self.axes, idx)}
 
+    def step_counts(self):
+        """(steps of each (h, T) pair of the grid, how many points share each pair): from the h and
+        T axes alone, without building any point's setup."""
+        hs = next((a.values for a in self.axes if a.name == "h"), (self.h,))
+        Ts = next((a.values for a in self.axes if a.name == "T"), (self.T,))
+        steps = np.array([[check_step(h, T) for T in Ts] for h in hs])
+        return steps, self.size // steps.size
+
     def run_of(self, point):
         """(setup, h, T) of a grid point."""
         run = {"h": self.h, "T": self.T, "theta": self.theta}
@@ -128,6 +136,13 @@ class Plan:
         for name, v in point.items():
             (run if name in RUN_NAMES else values)[name] = v
         return Setup.make(self.scene, self.method, values, run["theta"]), run["h"], run["T"]
+
+
+def variables(scene, method):
+    """The names a sweep can vary: the scene's numeric parameters, h, T, and theta for the
+    methods that take it."""
+    numeric = [p.name for p in scene.params if not p.choices and not isinstance(p.default, str)]
+    return numeric + ["h", "T"] + (["theta"] if method.takes_theta else [])
 
 
 def plan(scene, method, axes, measures=("growth",), values=None, theta=None, h=None, T=None):
@@ -142,8 +157,7 @@ def plan(scene, method, axes, measures=("growth",), values=None, theta=None, h=N
     names = [a.name for a in axes]
     if len(set(names)) < len(names):
         raise InputError(f"{quoted(max(names, key=names.count))} is varied twice: give each name once")
-    numeric = [p.name for p in sc.params if not p.choices and not isinstance(p.default, str)]
-    allowed = numeric + ["h", "T"] + (["theta"] if m.takes_theta else [])
+    allowed = variables(sc, m)
     for n in names:
         if n not in allowed:
             why = (" (theta applies to the methods 'theta' and 'theta-naive')" if n == "theta" else "")
@@ -172,10 +186,10 @@ def plan(scene, method, axes, measures=("growth",), values=None, theta=None, h=N
     corners = itertools.product(*[(a.values[0], a.values[-1]) for a in axes])
     for corner in corners:
         setup, hh, TT = p.run_of(dict(zip(names, corner)))
-        check_step(hh, TT)
+        steps = check_step(hh, TT)
         check_horizon(TT)
         if "error_final" in measures:
-            check_reference(setup, check_step(hh, TT) * hh)
+            check_reference(setup, steps * hh)
     return p
 
 

@@ -627,3 +627,14 @@ def test_max_steps_of_a_corner_is_the_integrator_cap():
     assert p.size == 2
     with pytest.raises(InputError, match="exceeds the cap"):
         sweep.plan("modulated", "midpoint", ["h=0.5:2:2"], T=float(MAX_STEPS))
+
+
+def test_step_counts_come_from_the_h_and_T_axes():
+    """Every (h, T) pair's steps, and how many points share each: T/h rounded up, whatever
+    else is varied (the app's work cap and memory lease read these)."""
+    p = sweep.plan("modulated", "midpoint", ["h=0.1:0.4:4", "eps=0:0.4:3", "T=10:30:3"], ["growth"])
+    counts, shared = p.step_counts()
+    assert shared == 3 and counts.shape == (4, 3)
+    assert counts.tolist() == [[math.ceil(T / h - 1e-9) for T in (10, 20, 30)] for h in (0.1, 0.2, 0.3, 0.4)]
+    fixed = sweep.plan("modulated", "midpoint", ["eps=0:0.4:5"], ["growth"], h=0.25, T=10)
+    assert fixed.step_counts()[0].tolist() == [[40]] and fixed.step_counts()[1] == 5
