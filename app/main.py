@@ -6,7 +6,6 @@ template, KaTeX and BokehJS come from Panel's and Bokeh's bundled resources.
 """
 import html
 import io
-import weakref
 from functools import partial
 from pathlib import Path
 
@@ -16,10 +15,9 @@ import param
 
 from cosymp.errors import InputError, RunError
 
+from .allocator import map_large_blocks
 from .presets import query_items
 from .state import (
-    FREED,
-    LOG,
     LONG_URL_NAMES,
     URL_NAMES,
     VIEWS,
@@ -32,6 +30,7 @@ from .state import (
     Study,
     ThetaLesson,
     WorkPrecision,
+    log_when_freed,
     study_report,
 )
 from .views import (
@@ -53,6 +52,7 @@ ASSETS = Path(__file__).resolve().parent.parent / "assets"
 NOTIFY_MS = {"error": 10000, "warning": 10000, "info": 6000}
 
 
+
 class App(param.Parameterized):
     """One session: the state objects (first computed from the link's settings), their views,
     URL sync and notifications."""
@@ -62,7 +62,8 @@ class App(param.Parameterized):
         query = pn.state.location.query_params if pn.state.location is not None else {}
         self._pending = []
         self._stopped = False
-        weakref.finalize(self, LOG.info, FREED)
+        map_large_blocks()
+        log_when_freed(self)
         try:
             self.study = Study(**{k: query[u] for k, u in URL_NAMES.items() if u in query})
         except (ValueError, TypeError, InputError) as err:

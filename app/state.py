@@ -19,6 +19,7 @@ import math
 import os
 import threading
 import time
+import weakref
 from concurrent.futures import ThreadPoolExecutor
 from functools import cache, partial
 
@@ -44,6 +45,7 @@ from cosymp.study import compare_until_failure as study_until_failure
 from cosymp.study import gauge_study
 from cosymp.summary import long_chunk, max_chunk
 
+from .allocator import give_back
 from .presets import long_horizon
 
 LIVE_MAX_STEPS = 2_000_000
@@ -60,6 +62,7 @@ SWEEP_THETAS = np.linspace(0.0, 1.0, 21)
 SWEEP_STEPS = 200
 LONG_BINS = 20_000
 LONG_CHUNK_SECONDS = 0.3
+LONG_DRAW_SECONDS = 1.0  # the long run's plots are redrawn at most this often (each redraw costs the event loop)
 
 
 # Memory: every computation leases its peak memory from one budget per server process before it
@@ -68,10 +71,6 @@ LONG_CHUNK_SECONDS = 0.3
 # a comparison peaks at <= 39 bytes per value its runs record (damped 39, charged 31, kapitza
 # 28), a long run at 179 MB (chunked, any horizon), a work-precision measurement at 43 MB and
 # long horizons at 29 MB.
-# Logged (under Panel's logger: PANEL_LOG_LEVEL=info shows it beside Panel's session lines) when
-# a page's App is garbage-collected, so an operator (and the load test) can see closed pages freed.
-LOG = logging.getLogger("panel.cosymp")
-FREED = "cosymp: a page's state was freed"
 MEMORY_CAP_MB = float(os.environ.get("COSYMP_MEMORY_CAP_MB", "4096"))
 BYTES_PER_RECORDED = 48
 LONG_RUN_BYTES = 256 << 20
@@ -120,6 +119,39 @@ class Lease:
 
 
 BUDGET = MemoryBudget(int(MEMORY_CAP_MB * (1 << 20)))
+
+
+# Logged (under Panel's logger: PANEL_LOG_LEVEL=info shows it beside Panel's session lines) when
+# a page's App is garbage-collected, so an operator (and the load test) can see closed pages freed.
+LOG = logging.getLogger("panel.cosymp")
+FREED = "cosymp: a page's state was freed"
+
+
+def log_when_freed(app):
+    """Log FREED once `app` has been garbage-collected and its memory given back to the system.
+    Its objects are freed after the collection's finalizers (this is one), so that happens in a
+    callback on the server's event loop once the collection is over (without a loop, at once).
+    (Not in the app's script: Panel clears a session's script globals when the session ends.)"""
+    try:
+        loop = asyncio.get_running_loop()
+    except RuntimeError:
+        loop = None
+    weakref.finalize(app, _freed, loop)
+
+
+def _freed(loop):
+    if loop is not None:
+        try:
+            loop.call_soon_threadsafe(_give_back_freed)
+            return
+        except RuntimeError:  # the loop has closed: the server is stopping
+            pass
+    _give_back_freed()
+
+
+def _give_back_freed():
+    give_back()
+    LOG.info(FREED)
 
 
 def comparison_bytes(setups, h, T):
@@ -694,6 +726,10 @@ class LongRun(param.Parameterized):
     def cancel(self):
         self._cancel = True
 
+    @staticmethod
+    def _envelopes(series):
+        return {x.label: {**x.arrays(), "failure": x.failure} for x in series}
+
     async def _run(self, setups, h, steps, lease):
         s = self.study
         width = max(1, math.ceil(steps / LONG_BINS))
@@ -711,7 +747,8 @@ class LongRun(param.Parameterized):
         done = 0
         chunk = min(cap, width * max(1, 4096 // width))
         self.param.update(progress=0.0, data={}, status="running")
-        started = time.perf_counter()
+        started = shown = time.perf_counter()
+        stale = False
         try:
             while done < steps and any(active) and not self._cancel:
                 n = min(chunk, steps - done)
@@ -731,10 +768,14 @@ class LongRun(param.Parameterized):
                         series[i].failure = failure
                         s.say(Note("warning", f"long run, {labels[i]}: {failure}; showing data up to there"))
                 done += n
-                wall = time.perf_counter() - tick
-                chunk = min(cap, width * max(1, round(n * LONG_CHUNK_SECONDS / max(wall, 1e-3) / width)))
-                self.param.update(progress=done / steps,
-                                  data={x.label: {**x.arrays(), "failure": x.failure} for x in series})
+                now = time.perf_counter()
+                chunk = min(cap, width * max(1, round(n * LONG_CHUNK_SECONDS / max(now - tick, 1e-3) / width)))
+                self.progress = done / steps
+                stale = True
+                if now - shown >= LONG_DRAW_SECONDS:
+                    self.data, stale, shown = self._envelopes(series), False, now
+            if stale:
+                self.data = self._envelopes(series)
             elapsed = time.perf_counter() - started
             if self._cancel:
                 self.status = f"cancelled at t = {done * h:.6g} after {elapsed:.1f} s"
@@ -744,6 +785,7 @@ class LongRun(param.Parameterized):
                 self.status = f"done: {done} steps per method in {elapsed:.1f} s"
         finally:
             lease.release()
+            give_back()
             self.running = False
 
 
@@ -798,6 +840,7 @@ class Worker:
                 self.error = RuntimeError("the computation stopped without a result (see the server's log)")
             if self.lease is not None:
                 self.lease.release()
+            give_back()
             self.finished.set()
 
 

@@ -381,3 +381,53 @@ def test_a_cancelled_long_run_frees_its_chunks_and_its_lease(monkeypatch):
     print(f"cancelled long run: peak heap +{(peak - before) / 1e6:.1f} MB, kept +{kept / 1e6:.2f} MB "
           f"(envelopes {envelopes / 1e6:.2f} MB)")
     assert peak - before > 20 * kept and kept < 2 * envelopes + (1 << 20)
+
+
+def test_a_long_run_redraws_at_most_once_per_interval_and_ends_with_everything(monkeypatch):
+    """Progress moves every chunk; the envelopes (each a redraw of the plots on the event loop)
+    are published at most once per LONG_DRAW_SECONDS, and the last publication holds every bin."""
+    import time
+
+    monkeypatch.setattr(state, "LONG_CHUNK_SECONDS", 0.01)
+    monkeypatch.setattr(state, "LONG_DRAW_SECONDS", 0.2)
+    s = Study(values={"gamma": 2e-4})
+    lr = LongRun(study=s, T_long=1e5)
+    progress, drawn = [], []
+    lr.param.watch(lambda e: progress.append(time.perf_counter()), "progress")
+    lr.param.watch(lambda e: drawn.append(time.perf_counter()), "data")
+    lr.start()
+    assert lr.status.startswith("done")
+    between = np.diff(drawn[:-1])  # the last: the final envelopes, whenever the run ends
+    assert len(progress) > 3 * len(drawn) and len(between) >= 2 and between.min() >= 0.2, (len(progress), between)
+    steps = round(1e5 / s.h)
+    width = -(-steps // state.LONG_BINS)
+    for d in lr.data.values():  # every bin (t: the time after each bin's first step)
+        assert len(d["t"]) == -(-steps // width)
+        assert d["t"][-1] == pytest.approx(((len(d["t"]) - 1) * width + 1) * s.h)
+
+
+def test_a_freed_app_is_logged_after_its_collection(caplog):
+    """log_when_freed: without an event loop, at once; with one, in a callback after the
+    collection (the App's objects are freed only after the collection's finalizers)."""
+    import asyncio
+
+    class Page:
+        pass
+
+    caplog.set_level("INFO", logger=state.LOG.name)
+    page = Page()
+    state.log_when_freed(page)
+    del page
+    gc.collect()
+    assert caplog.messages.count(state.FREED) == 1
+
+    async def on_a_loop():
+        page = Page()
+        state.log_when_freed(page)
+        del page
+        gc.collect()
+        logged_in_the_collection = caplog.messages.count(state.FREED)
+        await asyncio.sleep(0)
+        return logged_in_the_collection, caplog.messages.count(state.FREED)
+
+    assert asyncio.run(on_a_loop()) == (1, 2)
