@@ -64,8 +64,9 @@ def curve(x, y, kdim, vdim, label=""):
 
 
 def points(xs, ys, kdim, vdim):
-    """The first point of each slot's (x, y)."""
-    return [hv.Scatter({kdim: x[:1], vdim: y[:1]}, [dim(kdim)], [dim(vdim)], label=slot,
+    """The first point of each slot's (x, y); kdim and vdim are names or Dimensions."""
+    kd, vd = dim(kdim), dim(vdim)
+    return [hv.Scatter({kd.name: x[:1], vd.name: y[:1]}, [kd], [vd], label=slot,
                        datatype=["dictionary"]) for slot, x, y in zip(SLOTS, xs, ys)]
 
 
@@ -150,13 +151,26 @@ def phase(runs, axis, dense=False):
     dense layout the orbits are rasterized (datashader) instead."""
     i, j, xl, yl, _ = axis
     xs, ys = zip(*[zcols(c.run, i, j) if c is not None else (EMPTY, EMPTY) for c in comparisons(runs)])
-    paths = [curve(x, y, xl, yl, slot) for slot, x, y in zip(SLOTS, xs, ys)]
-    if dense:
-        from holoviews.operation.datashader import datashade
+    if not dense:
+        return hv.Overlay([curve(x, y, xl, yl, slot) for slot, x, y in zip(SLOTS, xs, ys)]
+                          + points(xs, ys, xl, yl))
+    xd, yd = raster_dims(xl, yl)
+    return hv.Overlay([rasterized(x, y, xd, yd, color) for x, y, color in zip(xs, ys, COLORS)]
+                      + points(xs, ys, xd, yd))
 
-        paths = [datashade(hv.Path({xl: x, yl: y}, [dim(xl), dim(yl)]), cmap=[color], dynamic=False,
-                           width=500, height=400) for x, y, color in zip(xs, ys, COLORS)]
-    return hv.Overlay(paths + points(xs, ys, xl, yl))
+
+def raster_dims(xl, yl):
+    """The dimensions of a rasterized portrait: always named x and y (labelled xl and yl), since
+    datashader compiles its aggregation anew for each pair of column names (about 1.2 s each on
+    the event loop; app/warmup.py compiles the one pair)."""
+    return hv.Dimension("x", label=xl), hv.Dimension("y", label=yl)
+
+
+def rasterized(x, y, xd, yd, color):
+    from holoviews.operation.datashader import datashade
+
+    return datashade(hv.Path({xd.name: x, yd.name: y}, [xd, yd]), cmap=[color], dynamic=False,
+                     width=500, height=400)
 
 
 def closed(q, p):

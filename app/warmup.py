@@ -2,9 +2,9 @@
 cold cache, compile) every compiled kernel the app can call, and import the plotting stack.
 
 The kernels are numba functions cached on disk (`__pycache__` beside cosymp's sources, or
-NUMBA_CACHE_DIR). On a warm cache this takes about two seconds; on a cold one (a fresh
-install, or after any change to cosymp's sources, which invalidates the cache) it compiles
-everything once, one to two minutes. Run `python app/warmup.py` to fill the cache ahead of time.
+NUMBA_CACHE_DIR). On a warm cache this takes about six seconds (four of them datashader's
+aggregation, which has no disk cache); on a cold one (a fresh install, or after any change to
+cosymp's sources, which invalidates the cache) it compiles everything once, one to three minutes. Run `python app/warmup.py` to fill the cache ahead of time.
 """
 import importlib
 import time
@@ -13,8 +13,9 @@ import time
 def warm():
     """Run every method on every scene it applies to (a few steps, with the tangent maps, the
     carried loop and the exact flow that compare() uses; one work-precision point, scipy's
-    solvers and one long-horizon point, one stability-map point), the gauge study, and import the
-    plotting modules the pages use. Returns the wall time in seconds."""
+    solvers and one long-horizon point, one stability-map point), the gauge study, import the
+    plotting modules the pages use and compile datashader's aggregation. Returns the wall time in
+    seconds."""
     from cosymp import sweep
     from cosymp import workprecision as wp
     from cosymp.integrate import Setup
@@ -34,7 +35,21 @@ def warm():
     gauge_study("midpoint", {}, SCENES["charged"].h, 10 * SCENES["charged"].h)
     for module in ("holoviews.plotting.bokeh", "holoviews.operation.downsample", "tsdownsample"):
         importlib.import_module(module)
+    rasterize_once()
     return time.perf_counter() - start
+
+
+def rasterize_once():
+    """Rasterize a small path as dense portraits are (columns named x and y, as views.raster_dims
+    names them): datashader compiles its aggregation for each pair of column names on first use,
+    without a disk cache (about 4 s and 150 MB, on the event loop of whichever page first shows
+    more than DENSE_RECORDS records)."""
+    import holoviews as hv
+    import numpy as np
+    from holoviews.operation.datashader import datashade
+
+    x = np.linspace(0.0, 1.0, 16)
+    datashade(hv.Path({"x": x, "y": x}, ["x", "y"]), cmap=["#000000"], dynamic=False, width=8, height=8)
 
 
 if __name__ in ("__main__", "panel_setup_module"):
