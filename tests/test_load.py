@@ -39,10 +39,9 @@ in the page's URL (the server's state) must end at 0.2 + 0.01 x presses.
 
 Memory and threads: VmRSS and Threads of the server from /proc/<pid>/status every 0.2 s (no
 psutil); server and machine CPU from /proc; event-loop lag as the time /liveness takes to answer.
-The server runs with MALLOC_MMAP_THRESHOLD_=1 MiB: glibc then maps every block of 1 MiB or more on
-its own and unmaps it when freed (by default it raises that threshold to the largest block freed,
-up to 32 MiB, and keeps later frees in its heaps), so a closed session's arrays leave RSS and RSS
-measures what is live rather than what the allocator caches.
+The app hands freed memory back to the system itself (app/allocator.py: glibc's mmap threshold
+fixed at 1 MiB, malloc_trim once a page's state is freed and after a long run or a measurement),
+so RSS measures what is live rather than what the allocator keeps.
 
 Bounds, from runs on 2 shared cores (another suite's server and Chromium often running too):
 * Cap 512 MB, not 1 GB: the live views refuse more than 2e6 steps and cosymp records at most 2e7
@@ -54,15 +53,19 @@ Bounds, from runs on 2 shared cores (another suite's server and Chromium often r
   three plots), ten sessions and the long run queue there, and Chromium's 11 renderers take most
   of the two cores. 40 s is ~1.5x the worst p95 seen; a starved session (waiting for the long
   run, minutes) or lost updates (MOVE_TIMEOUT_MS) go far past it.
-* Peak RSS - idle < the cap (observed 240-480 MB).
+* Peak RSS - idle < the cap (observed 326-402 MB; idle ~438 MB includes datashader, compiled by
+  the warm-up).
 * After close: every page's state freed (the finalizer's log lines = sessions launched); threads
   <= idle + EXECUTOR_THREADS (the asyncio default executor's workers, min(32, cpu + 4), are created
-  on demand and reused by every session: not per-session); RSS - idle < AFTER_MARGIN_MB = the cap.
-  With everything freed RSS stayed 254-280 MB over idle (557-582 MB): small-object heaps the
-  allocator keeps; that residue, not live data, is what the margin allows.
-  Before, every closed session stayed alive (RSS 730-780 MB): Panel's EditableFloatSlider sits
-  in a global link registry for good. A fixed 8 s wait also read RSS before Panel's collection
-  had freed the last page's 330 MB comparison (its objects are cycles): hence the polling.
+  on demand and reused by every session: not per-session); RSS - idle < AFTER_MARGIN_MB.
+  Observed 72-75 MB over idle. Before the app trimmed its heaps, RSS stayed 250-515 MB over idle
+  with everything freed (glibc's per-thread heaps); before the slider fix every closed session
+  stayed alive (Panel's EditableFloatSlider sits in a global link registry for good). A fixed 8 s
+  wait also read RSS before Panel's collection had freed the last page's 330 MB comparison (its
+  objects are cycles): hence the polling, and the freed count is read before the RSS window.
+* Click on Cancel to "cancelled at" shown < CANCEL_BOUND_S = 20 s: observed 1.2-2.8 s here, 12.7 s
+  once on the CI machine while the long run still redrew its plots after every 0.3 s chunk (now
+  at most once a second).
 
 Everything measured goes to tests/artifacts/load.json and to stdout (run pytest with -s).
 """
@@ -98,8 +101,9 @@ SAMPLE_S = 0.2
 DESTROY_TIMEOUT_S = 45
 P95_BOUND_S = 40.0
 FREE_WAIT_S = 60               # after the last session is destroyed, wait this long at most for every page's state to be freed
+CANCEL_BOUND_S = 20            # click to "cancelled at" shown
 LONG_STALL_S = 60              # longest time the long run's progress (1% steps) may stand still
-AFTER_MARGIN_MB = CAP_MB
+AFTER_MARGIN_MB = 200
 REFUSAL_JUMP_MB = 100
 REFUSAL_T = 300.0
 OVER_CAP_H = 0.0002            # 1.5e6 steps: 549 MB, over the cap
@@ -251,8 +255,7 @@ class Sessions:
 @pytest.fixture(scope="module")
 def server():
     """`panel serve app --setup app/warmup.py` with the small cap; yields (base URL, pid)."""
-    env = {"COSYMP_MEMORY_CAP_MB": str(CAP_MB), "PANEL_LOG_LEVEL": "info", "PYTHONUNBUFFERED": "1",
-           "MALLOC_MMAP_THRESHOLD_": str(1 << 20)}
+    env = {"COSYMP_MEMORY_CAP_MB": str(CAP_MB), "PANEL_LOG_LEVEL": "info", "PYTHONUNBUFFERED": "1"}
     options = ["--check-unused-sessions", str(CHECK_UNUSED_MS), "--unused-session-lifetime", str(SESSION_LIFETIME_MS)]
     with served(SERVER_LOG, env, options) as url_pid:
         yield url_pid
@@ -524,7 +527,7 @@ async def scenario(base, sampler, sessions, probe=None):
             r["long_progress"] = await progress_task
             t_cancel = time.monotonic()
             await long_page.locator("button", has_text="Cancel").click()
-            await long_page.get_by_text("cancelled at t =").first.wait_for(timeout=15_000)
+            await long_page.get_by_text("cancelled at t =").first.wait_for(timeout=MOVE_TIMEOUT_MS)
             r["cancel_s"] = round(time.monotonic() - t_cancel, 2)
             r["cancel_status"] = await long_status(long_page)
             rss, threads = await asyncio.to_thread(sampler.settled, 2.0)
@@ -551,8 +554,8 @@ def after_close(r, sampler, sessions):
     r["sessions"] = {"launched": launched, "destroyed": destroyed, "pages_opened": SLIDER_PAGES + 2}
     waited = time.monotonic()
     while True:
+        freed = sessions.freed()  # before the window: its RSS is then read after the pages were freed
         rss, threads = sampler.settled(1.0)
-        freed = sessions.freed()
         if (freed >= launched and threads <= r["idle"]["threads"] + EXECUTOR_THREADS + OTHER_THREADS) \
                 or time.monotonic() - waited > FREE_WAIT_S:
             break
@@ -637,7 +640,7 @@ def test_the_long_run_kept_progressing_during_the_load(load):
     assert load["long_page_plot_updates_during_moves"] > 0
     assert load["long_status_before_refusals"] == "running"
     assert load["cancel_status"].startswith("cancelled at t ="), load["cancel_status"]
-    assert load["cancel_s"] < 10, load["cancel_s"]
+    assert load["cancel_s"] < CANCEL_BOUND_S, load["cancel_s"]
 
 
 def test_a_cancelled_run_gives_its_memory_lease_back(load):
