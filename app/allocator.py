@@ -20,8 +20,15 @@ MMAP_THRESHOLD = 1 << 20
 
 @cache
 def _glibc():
-    libc = ctypes.CDLL(None)
-    return libc if hasattr(libc, "malloc_trim") and hasattr(libc, "mallopt") else None
+    try:
+        libc = ctypes.CDLL(None)
+    except (OSError, TypeError):  # Windows has no process-wide C namespace to open
+        return None
+    if not (hasattr(libc, "malloc_trim") and hasattr(libc, "mallopt")):
+        return None
+    libc.malloc_trim.argtypes, libc.malloc_trim.restype = [ctypes.c_size_t], ctypes.c_int
+    libc.mallopt.argtypes, libc.mallopt.restype = [ctypes.c_int, ctypes.c_int], ctypes.c_int
+    return libc
 
 
 @cache

@@ -52,7 +52,6 @@ ASSETS = Path(__file__).resolve().parent.parent / "assets"
 NOTIFY_MS = {"error": 10000, "warning": 10000, "info": 6000}
 
 
-
 class App(param.Parameterized):
     """One session: the state objects (first computed from the link's settings), their views,
     URL sync and notifications."""
@@ -106,9 +105,9 @@ class App(param.Parameterized):
         measurements before their next run) and gives back the memory of its results; nothing
         is drawn or notified for it any more."""
         self._stopped = True
-        for background in (self.long, self.measure, self.horizons, self.stability):
+        for background in (self.measure, self.horizons, self.stability):
             background.cancel()
-        for derived in (self.study, self.gauges, self.lesson, self.stability):
+        for derived in (self.long, self.study, self.gauges, self.lesson, self.stability):
             derived.release()
 
     def _on_message(self, event):

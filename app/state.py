@@ -701,6 +701,7 @@ class LongRun(param.Parameterized):
         if "T_long" not in params:
             self.T_long = long_horizon(self.study.scene)
         self._cancel = False
+        self._closed = False
         self.study.param.watch(self._on_scene, ["scene"])
 
     def _on_scene(self, event):
@@ -726,6 +727,12 @@ class LongRun(param.Parameterized):
     def cancel(self):
         self._cancel = True
 
+    def release(self):
+        """The page is gone: stop after the current chunk and publish nothing more (drawn after the
+        session ended, new data would keep the destroyed document alive)."""
+        self._closed = True
+        self._cancel = True
+
     @staticmethod
     def _envelopes(series):
         return {x.label: {**x.arrays(), "failure": x.failure} for x in series}
@@ -747,7 +754,8 @@ class LongRun(param.Parameterized):
         done = 0
         chunk = min(cap, width * max(1, 4096 // width))
         self.param.update(progress=0.0, data={}, status="running")
-        started = shown = time.perf_counter()
+        started = time.perf_counter()
+        shown = -math.inf
         stale = False
         try:
             while done < steps and any(active) and not self._cancel:
@@ -774,8 +782,8 @@ class LongRun(param.Parameterized):
                 stale = True
                 if now - shown >= LONG_DRAW_SECONDS:
                     self.data, stale, shown = self._envelopes(series), False, now
-            if stale:
-                self.data = self._envelopes(series)
+            if self._closed:
+                return
             elapsed = time.perf_counter() - started
             if self._cancel:
                 self.status = f"cancelled at t = {done * h:.6g} after {elapsed:.1f} s"
@@ -784,9 +792,11 @@ class LongRun(param.Parameterized):
             else:
                 self.status = f"done: {done} steps per method in {elapsed:.1f} s"
         finally:
+            if stale and not self._closed:
+                self.data = self._envelopes(series)
             lease.release()
-            give_back()
             self.running = False
+            give_back()
 
 
 # ---------------------------------------------------------------- work against precision

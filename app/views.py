@@ -40,6 +40,7 @@ from .state import (
     ThetaLesson,
     WorkPrecision,
 )
+from .warmup import RASTER_COLUMNS
 
 SLOTS = ("A", "B")
 COLORS = ("#1864ab", "#e8590c")
@@ -65,7 +66,7 @@ def curve(x, y, kdim, vdim, label=""):
 
 def points(xs, ys, kdim, vdim):
     """The first point of each slot's (x, y); kdim and vdim are names or Dimensions."""
-    kd, vd = dim(kdim), dim(vdim)
+    kd, vd = (d if isinstance(d, hv.Dimension) else dim(d) for d in (kdim, vdim))
     return [hv.Scatter({kd.name: x[:1], vd.name: y[:1]}, [kd], [vd], label=slot,
                        datatype=["dictionary"]) for slot, x, y in zip(SLOTS, xs, ys)]
 
@@ -160,10 +161,10 @@ def phase(runs, axis, dense=False):
 
 
 def raster_dims(xl, yl):
-    """The dimensions of a rasterized portrait: always named x and y (labelled xl and yl), since
-    datashader compiles its aggregation anew for each pair of column names (about 1.2 s each on
-    the event loop; app/warmup.py compiles the one pair)."""
-    return hv.Dimension("x", label=xl), hv.Dimension("y", label=yl)
+    """The dimensions of a rasterized portrait: always named RASTER_COLUMNS (labelled xl and yl),
+    since datashader compiles its aggregation anew for each pair of column names (about 1.2 s
+    each on the event loop; the warm-up compiles this pair)."""
+    return hv.Dimension(RASTER_COLUMNS[0], label=xl), hv.Dimension(RASTER_COLUMNS[1], label=yl)
 
 
 def rasterized(x, y, xd, yd, color):

@@ -1,13 +1,17 @@
 """Warm-up for `panel serve app --setup app/warmup.py`: before the first page, load (or, on a
-cold cache, compile) every compiled kernel the app can call, and import the plotting stack.
+cold cache, compile) every compiled kernel the app can call, import the plotting stack and
+compile datashader's aggregation.
 
 The kernels are numba functions cached on disk (`__pycache__` beside cosymp's sources, or
 NUMBA_CACHE_DIR). On a warm cache this takes about six seconds (four of them datashader's
 aggregation, which has no disk cache); on a cold one (a fresh install, or after any change to
-cosymp's sources, which invalidates the cache) it compiles everything once, one to three minutes. Run `python app/warmup.py` to fill the cache ahead of time.
+cosymp's sources, which invalidates the cache) it compiles everything once, one to three
+minutes. Run `python app/warmup.py` to fill the cache ahead of time.
 """
 import importlib
 import time
+
+RASTER_COLUMNS = ("x", "y")  # the column names of every rasterized portrait (views.raster_dims)
 
 
 def warm():
@@ -40,16 +44,16 @@ def warm():
 
 
 def rasterize_once():
-    """Rasterize a small path as dense portraits are (columns named x and y, as views.raster_dims
-    names them): datashader compiles its aggregation for each pair of column names on first use,
-    without a disk cache (about 4 s and 150 MB, on the event loop of whichever page first shows
-    more than DENSE_RECORDS records)."""
+    """Rasterize a small path as dense portraits are (columns RASTER_COLUMNS): datashader compiles
+    its aggregation for each pair of column names on first use, without a disk cache (about 4 s
+    and 150 MB, on the event loop of whichever page first shows more than DENSE_RECORDS records)."""
     import holoviews as hv
     import numpy as np
     from holoviews.operation.datashader import datashade
 
     x = np.linspace(0.0, 1.0, 16)
-    datashade(hv.Path({"x": x, "y": x}, ["x", "y"]), cmap=["#000000"], dynamic=False, width=8, height=8)
+    datashade(hv.Path(dict.fromkeys(RASTER_COLUMNS, x), list(RASTER_COLUMNS)), cmap=["#000000"], dynamic=False,
+              width=8, height=8)
 
 
 if __name__ in ("__main__", "panel_setup_module"):

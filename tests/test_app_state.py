@@ -163,6 +163,10 @@ def test_series_are_downsampled_and_dense_portraits_rasterized():
     assert s.shown == "charged/dense"
     phase = views.phase(s.results, views.phase_axes("charged")[0], dense=True)
     assert [type(el).__name__ for el in phase] == ["RGB", "RGB", "Scatter", "Scatter"]
+    axis = views.phase_axes("charged")[2]
+    labels = {(el.kdims[0].label, el.kdims[1].label if isinstance(el, hv.RGB) else el.vdims[0].label)
+              for el in views.phase(s.results, axis, dense=True)}
+    assert labels == {axis[2:4]} == {("y", "p_y")}
 
 
 def test_theta_lesson_shows_lifted_symplectic_for_every_theta_and_naive_only_at_half():
@@ -389,7 +393,7 @@ def test_a_long_run_redraws_at_most_once_per_interval_and_ends_with_everything(m
     import time
 
     monkeypatch.setattr(state, "LONG_CHUNK_SECONDS", 0.01)
-    monkeypatch.setattr(state, "LONG_DRAW_SECONDS", 0.2)
+    monkeypatch.setattr(state, "LONG_DRAW_SECONDS", 0.1)
     s = Study(values={"gamma": 2e-4})
     lr = LongRun(study=s, T_long=1e5)
     progress, drawn = [], []
@@ -397,8 +401,10 @@ def test_a_long_run_redraws_at_most_once_per_interval_and_ends_with_everything(m
     lr.param.watch(lambda e: drawn.append(time.perf_counter()), "data")
     lr.start()
     assert lr.status.startswith("done")
-    between = np.diff(drawn[:-1])  # the last: the final envelopes, whenever the run ends
-    assert len(progress) > 3 * len(drawn) and len(between) >= 2 and between.min() >= 0.2, (len(progress), between)
+    # The gaps are timed after each publication, the interval before it: allow for jitter in
+    # building the envelopes. The last publication (the final envelopes) comes whenever the run ends.
+    between = np.diff(drawn[:-1])
+    assert len(progress) > 3 * len(drawn) and len(between) >= 3 and between.min() >= 0.07, (len(progress), between)
     steps = round(1e5 / s.h)
     width = -(-steps // state.LONG_BINS)
     for d in lr.data.values():  # every bin (t: the time after each bin's first step)
@@ -406,28 +412,56 @@ def test_a_long_run_redraws_at_most_once_per_interval_and_ends_with_everything(m
         assert d["t"][-1] == pytest.approx(((len(d["t"]) - 1) * width + 1) * s.h)
 
 
-def test_a_freed_app_is_logged_after_its_collection(caplog):
+def test_a_freed_app_gives_memory_back_then_is_logged_after_its_collection(monkeypatch):
     """log_when_freed: without an event loop, at once; with one, in a callback after the
-    collection (the App's objects are freed only after the collection's finalizers)."""
+    collection (the App's objects are freed only after the collection's finalizers). Memory is
+    given back before the line is logged (the load test reads RSS after the lines)."""
     import asyncio
+    import types
+
+    events = []
+    monkeypatch.setattr(state, "give_back", lambda: events.append("give_back"))
+    monkeypatch.setattr(state, "LOG", types.SimpleNamespace(info=events.append))
 
     class Page:
         pass
 
-    caplog.set_level("INFO", logger=state.LOG.name)
     page = Page()
     state.log_when_freed(page)
     del page
     gc.collect()
-    assert caplog.messages.count(state.FREED) == 1
+    assert events == ["give_back", state.FREED]
 
     async def on_a_loop():
         page = Page()
         state.log_when_freed(page)
         del page
         gc.collect()
-        logged_in_the_collection = caplog.messages.count(state.FREED)
+        in_the_collection = list(events)
         await asyncio.sleep(0)
-        return logged_in_the_collection, caplog.messages.count(state.FREED)
+        return in_the_collection
 
-    assert asyncio.run(on_a_loop()) == (1, 2)
+    assert asyncio.run(on_a_loop()) == ["give_back", state.FREED]
+    assert events == ["give_back", state.FREED] * 2
+
+
+def test_a_long_run_whose_page_closed_stops_and_publishes_nothing_more(monkeypatch):
+    """release() (the session was destroyed): the run stops after its chunk, gives its lease back,
+    and publishes neither the envelopes computed since the last redraw nor a status."""
+    budget = state.MemoryBudget(cap_bytes=1 << 30)
+    monkeypatch.setattr(state, "BUDGET", budget)
+    s = Study(values={"gamma": 2e-4})
+    held = budget.used
+    lr = LongRun(study=s, T_long=2e5)
+    published, at_release = [], []
+
+    def close_the_page(event):
+        if event.new > 0.05 and not at_release:
+            at_release.append(len(published))
+            lr.release()
+
+    lr.param.watch(lambda e: published.append(e.new), "data")
+    lr.param.watch(close_the_page, "progress")
+    lr.start()
+    assert at_release == [len(published)] and published and not lr.running
+    assert lr.status == "running" and budget.used == held
