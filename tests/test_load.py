@@ -53,8 +53,10 @@ Bounds, from runs on 2 shared cores (another suite's server and Chromium often r
   three plots), ten sessions and the long run queue there, and Chromium's 11 renderers take most
   of the two cores. 40 s is ~1.5x the worst p95 seen; a starved session (waiting for the long
   run, minutes) or lost updates (MOVE_TIMEOUT_MS) go far past it.
-* Peak RSS - idle < the cap (observed 326-402 MB; idle ~438 MB includes datashader, compiled by
-  the warm-up).
+* Peak RSS - RSS with the ten pages open (before the long run) < the cap: the cap is on
+  computations, the pages' documents come on top (observed: idle 437-443 MB, which includes
+  datashader compiled by the warm-up; pages open +50-60 MB; peak 763-891 MB, 326-448 MB over
+  idle). Before the app gave freed memory back, CI saw a peak 520 MB over idle.
 * After close: every page's state freed (the finalizer's log lines = sessions launched); threads
   <= idle + EXECUTOR_THREADS (the asyncio default executor's workers, min(32, cpu + 4), are created
   on demand and reused by every session: not per-session); RSS - idle < AFTER_MARGIN_MB.
@@ -488,6 +490,8 @@ async def scenario(base, sampler, sessions, probe=None):
             # Unloaded baseline: BASELINE_MOVES on page 1 alone.
             r["baseline"] = await move_slider(opened[0][1], BASELINE_MOVES, time.monotonic() + MOVES_WALL_S)
             r["latency_baseline_s"] = summary(r["baseline"]["update_s"])
+            rss, threads = await asyncio.to_thread(sampler.settled, 1.0)
+            r["pages_open"] = {"rss_mb": round(rss, 1), "threads": threads}
 
             # Page 0: the long run.
             long_ctx, long_page, _ = await new_page(browser, base + preset.query(URL_NAMES, LONG_URL_NAMES),
@@ -601,7 +605,8 @@ def load(server):
     alone = r["latency_baseline_s"]
     print(f"load: one session alone (before the long run): update p50 {alone.get('p50')} s, max {alone.get('max')} s; "
           f"page loads {min(r['page_load_s'])}-{max(r['page_load_s'])} s")
-    print(f"load: RSS idle {r['idle']['rss_mb']} MB, peak {r['peak']['rss_mb']} MB, after cancel "
+    print(f"load: RSS idle {r['idle']['rss_mb']} MB, ten pages open {r['pages_open']['rss_mb']} MB, "
+          f"peak {r['peak']['rss_mb']} MB, after cancel "
           f"{r['after_cancel']['rss_mb']} MB, after close {r['after_close']['rss_mb']} MB "
           f"({r['after_close']['pages_freed']} pages' state freed, {r['after_close']['waited_after_destroyed_s']} s "
           f"after the last session was destroyed; cap {CAP_MB} MB); "
@@ -649,7 +654,9 @@ def test_a_cancelled_run_gives_its_memory_lease_back(load):
 
 
 def test_memory_stays_under_the_cap(load):
-    assert load["peak"]["rss_mb"] - load["idle"]["rss_mb"] < CAP_MB, (load["idle"], load["peak"])
+    """The cap is on computations; the open pages' own documents come on top (README)."""
+    assert load["peak"]["rss_mb"] - load["pages_open"]["rss_mb"] < CAP_MB, \
+        (load["idle"], load["pages_open"], load["peak"])
 
 
 def test_a_request_over_the_cap_is_refused_and_the_page_still_works(load):
