@@ -60,12 +60,12 @@ Bounds, from runs on 2 shared cores (another suite's server and Chromium often r
 * After close: every page's state freed (the finalizer's log lines = sessions launched); threads
   <= idle + EXECUTOR_THREADS (the asyncio default executor's workers, min(32, cpu + 4), are created
   on demand and reused by every session: not per-session); RSS - idle < AFTER_MARGIN_MB.
-  Observed 72-75 MB over idle. Before the app trimmed its heaps, RSS stayed 250-515 MB over idle
+  Observed 66-77 MB over idle. Before the app trimmed its heaps, RSS stayed 250-515 MB over idle
   with everything freed (glibc's per-thread heaps); before the slider fix every closed session
   stayed alive (Panel's EditableFloatSlider sits in a global link registry for good). A fixed 8 s
   wait also read RSS before Panel's collection had freed the last page's 330 MB comparison (its
   objects are cycles): hence the polling, and the freed count is read before the RSS window.
-* Click on Cancel to "cancelled at" shown < CANCEL_BOUND_S = 20 s: observed 1.2-2.8 s here, 12.7 s
+* Click on Cancel to "cancelled at" shown < CANCEL_BOUND_S = 20 s: observed 0.7-2.8 s, 12.7 s
   once on the CI machine while the long run still redrew its plots after every 0.3 s chunk (now
   at most once a second).
 
