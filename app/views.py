@@ -1148,12 +1148,11 @@ def map_plot(result, on_tap):
 def map_failures(result):
     if result is None:
         return ""
-    bad = result.status != "ok"
-    if not bad.any():
+    failed, first = result.failures()
+    if not failed:
         return (f"<p class='doc'>Every one of the {result.plan.size} runs completed ({html.escape(result.where)}, "
                 f"{result.wall_s:.1f} s).</p>")
-    first = next(s for s in result.status.ravel() if s != "ok")
-    return (f"<p class='doc'><b>{int(bad.sum())} of {result.plan.size} runs failed</b> (black cells), e.g.: "
+    return (f"<p class='doc'><b>{failed} of {result.plan.size} runs failed</b> (black cells), e.g.: "
             f"{html.escape(first)}</p>")
 
 

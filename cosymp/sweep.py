@@ -255,6 +255,11 @@ class Result:
         for i in range(self.plan.size):
             yield {**self.plan.point(i), **{k: float(flat[k][i]) for k in self.plan.measures}, "status": st[i]}
 
+    def failures(self):
+        """(how many points failed, the first failure's message or None)."""
+        bad = [s for s in self.status.ravel() if s != "ok"]
+        return len(bad), (bad[0] if bad else None)
+
     @property
     def overhead_per_task_s(self):
         """(parallel wall x workers - compute) / tasks: what scheduling, transfer and idle workers
@@ -423,12 +428,11 @@ def read(path):
     return {k: (v if k == "status" else [float(x) for x in v]) for k, v in cols.items()}
 
 
-
 def summary(result):
     """A few lines on what ran, how, and the range of each measure."""
     p = result.plan
     grid = " x ".join(f"{a.name} {len(a.values)}" for a in p.axes)
-    failed = int(np.sum(result.status != "ok"))
+    failed, first = result.failures()
     tasks = len(result.task_seconds)
     lines = [f"{p.scene} with {p.method}: {p.size} points ({grid}), h = {p.h:g}, T = {p.T:g} where not varied",
              f"  {result.wall_s:.2f} s on {result.where}; {tasks} tasks after the first two points"
@@ -443,6 +447,5 @@ def summary(result):
         at = ", ".join(f"{a.name} = {a.values[i]:.4g}" for a, i in zip(p.axes, hi))
         lines.append(f"  {k}: min {np.nanmin(v):.4g}, max {np.nanmax(v):.4g} (at {at})")
     if failed:
-        first = next(s for s in result.status.ravel() if s != "ok")
         lines.append(f"  {failed} point{'s' if failed > 1 else ''} failed, e.g.: {first}")
     return "\n".join(lines) + "\n"
