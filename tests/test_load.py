@@ -240,7 +240,7 @@ class Sessions:
                 len(set(re.findall(r"Session (\d+) destroyed", text))))
 
     def freed(self):
-        """How many pages' App objects were garbage-collected (app.main logs each one)."""
+        """How many pages' App objects were garbage-collected (app.state.log_when_freed logs each one)."""
         from app.state import FREED
 
         return self.log_path.read_text(errors="replace").count(FREED)
