@@ -47,6 +47,7 @@ from .views import (
     ThetaView,
     WorkPrecisionView,
 )
+from .warmup import prepare
 
 ASSETS = Path(__file__).resolve().parent.parent / "assets"
 NOTIFY_MS = {"error": 10000, "warning": 10000, "info": 6000}
@@ -58,6 +59,7 @@ class App(param.Parameterized):
 
     def __init__(self, **params):
         super().__init__(**params)
+        prepare(preload=False)
         query = pn.state.location.query_params if pn.state.location is not None else {}
         self._pending = []
         self._stopped = False

@@ -47,6 +47,7 @@ from cosymp.summary import long_chunk, max_chunk
 
 from .allocator import give_back
 from .presets import long_horizon
+from .warmup import FIRST_VIEW
 
 LIVE_MAX_STEPS = 2_000_000
 DENSE_RECORDS = 100_000
@@ -389,16 +390,16 @@ class Study(Derived):
     can be changed; the other follows.
     """
 
-    scene = param.Selector(default="damped", objects={s.title: k for k, s in SCENES.items()},
+    scene = param.Selector(default=FIRST_VIEW["scene"], objects={s.title: k for k, s in SCENES.items()},
                            doc="The time-dependent Hamiltonian system.")
-    method = param.Selector(default="midpoint", objects={m.title: k for k, m in METHODS.items()},
+    method = param.Selector(default=FIRST_VIEW["method"], objects={m.title: k for k, m in METHODS.items()},
                             doc="The method under study.")
-    other = param.Selector(default="rk4", objects={m.title: k for k, m in METHODS.items()},
+    other = param.Selector(default=FIRST_VIEW["other"], objects={m.title: k for k, m in METHODS.items()},
                            doc="The method it is compared with.", label="Compared with")
     theta = param.Number(default=0.5, bounds=(0.0, 1.0), step=0.01, label="θ",
                          doc="θ of the theta methods (θ = 1/2: midpoint; θ = 0: the paper's scheme).")
-    h = param.Number(default=SCENES["damped"].h, doc="Step size h > 0.")
-    T = param.Number(default=SCENES["damped"].T, doc="Horizon T of the live views.")
+    h = param.Number(default=SCENES[FIRST_VIEW["scene"]].h, doc="Step size h > 0.")
+    T = param.Number(default=SCENES[FIRST_VIEW["scene"]].T, doc="Horizon T of the live views.")
     values = param.Dict(default={}, doc="Scene parameters that differ from the scene's defaults.")
     view = param.Selector(default="compare", objects=VIEWS, doc="The active view.")
     inputs = param.Parameter(doc="The scene's parameters as a Parameterized (for the controls).")
@@ -688,7 +689,7 @@ class LongRun(param.Parameterized):
     progress, cancellation and per-bin envelopes (at most LONG_BINS bins) as data arrives."""
 
     study = param.ClassSelector(class_=Study)
-    T_long = param.Number(default=long_horizon("damped"), label="Long horizon T",
+    T_long = param.Number(default=long_horizon(FIRST_VIEW["scene"]), label="Long horizon T",
                           doc="Horizon of the long run (chunked; capped at 1e8 steps).")
     progress = param.Number(default=0.0, bounds=(0.0, 1.0), doc="Fraction of the steps done.")
     running = param.Boolean(default=False)

@@ -1,45 +1,61 @@
-"""Warm-up for `panel serve app --setup app/warmup.py`: before the first page, load (or, on a
-cold cache, compile) every compiled kernel the app can call, import the plotting stack and
-compile datashader's aggregation.
+"""The app's kernels, compiled before they are needed.
 
-The kernels are numba functions cached on disk (`__pycache__` beside cosymp's sources, or
-NUMBA_CACHE_DIR). On a warm cache this takes about six seconds (four of them datashader's
-aggregation, which has no disk cache); on a cold one (a fresh install, or after any change to
-cosymp's sources, which invalidates the cache) it compiles everything once, one to three
-minutes. Run `python app/warmup.py` to fill the cache ahead of time.
+`python app/warmup.py` compiles every kernel that is not in numba's disk cache yet, in one
+process per core, with progress (the same as `cosymp compile`), and returns at once on a warm
+cache.
+
+`panel serve app --setup app/warmup.py` runs `prepare()` before the server starts. On a warm
+cache it loads every kernel and compiles datashader's aggregation (a few seconds). On a cold
+cache (a fresh install, or after a change to the sources the kernels are built from) it compiles
+the first page's kernels in one process per core, serves, and compiles the rest in lowered-
+priority processes meanwhile; a run whose kernels are still being compiled waits for them
+(cosymp.warm.ensure), and later kernels load from the cache on first use. The server itself
+never compiles a kernel, so it stays at its warm size.
 """
 import importlib
 import time
 
 RASTER_COLUMNS = ("x", "y")  # the column names of every rasterized portrait (views.raster_dims)
+FIRST_VIEW = {"scene": "damped", "method": "midpoint", "other": "rk4"}
+"""What the app shows first (state.Study's defaults): its kernels are compiled first."""
 
 
-def warm():
-    """Run every method on every scene it applies to (a few steps, with the tangent maps, the
-    carried loop and the exact flow that compare() uses; one work-precision point, scipy's
-    solvers and one long-horizon point, one stability-map point), the gauge study, import the
-    plotting modules the pages use and compile datashader's aggregation. Returns the wall time in
-    seconds."""
-    from cosymp import sweep
-    from cosymp import workprecision as wp
+def first_keys():
+    """The compile units the first page runs (both methods and the scene's exact flow, for its
+    error), in the order that makes them ready soonest on two cores: the first method's beside
+    the exact flow's and then the other method's (a worker's first unit also pays its start-up)."""
+    from cosymp import warm
     from cosymp.integrate import Setup
-    from cosymp.methods import METHODS
     from cosymp.scenes import SCENES
-    from cosymp.study import compare, gauge_study
+
+    scene = SCENES[FIRST_VIEW["scene"]]
+    methods = [FIRST_VIEW["method"]] + (["exact"] if scene.has_flow else []) + [FIRST_VIEW["other"]]
+    return list(dict.fromkeys(warm.key_of(Setup.make(scene, m)) for m in methods))
+
+
+def prepare(report=print, preload=True):
+    """Make the kernels ready (see the module's doc); with preload, load them into this process
+    (every kernel and datashader's aggregation on a warm cache, the first page's on a cold one).
+    Returns the seconds it took."""
+    from cosymp import warm
 
     start = time.perf_counter()
-    for scene in SCENES.values():
-        methods = [m.name for m in METHODS.values() if m.refusal(scene) is None]
-        for name in methods:
-            compare(Setup.make(scene, name), scene.h, 10 * scene.h, cloud_points=8)
-        measured = [m for m in methods if m != "exact"]
-        wp.measure(scene.name, measured, T=4 * scene.h, hs=[scene.h], peers=True, rtols=(1e-3,), budget=0.0)
-        wp.drift(scene.name, measured, h=scene.h, horizons=[2 * scene.h])
-        sweep.figures(Setup.make(scene, measured[0]), scene.h, 4 * scene.h, sweep.MEASURES)
-    gauge_study("midpoint", {}, SCENES["charged"].h, 10 * SCENES["charged"].h)
-    for module in ("holoviews.plotting.bokeh", "holoviews.operation.downsample", "tsdownsample"):
-        importlib.import_module(module)
-    rasterize_once()
+    first = first_keys()
+    compiler = warm.start(first, report=lambda line: report(f"cosymp compile {line}"))
+    if preload:
+        for module in ("holoviews.plotting.bokeh", "holoviews.operation.downsample", "tsdownsample"):
+            importlib.import_module(module)
+    if compiler is None:
+        if preload:
+            for unit in warm.units():
+                unit.run()
+            rasterize_once()
+        return time.perf_counter() - start
+    compiler.wait(first)
+    if preload:
+        for unit in warm.units():
+            if unit.key in first:
+                unit.run()
     return time.perf_counter() - start
 
 
@@ -56,5 +72,9 @@ def rasterize_once():
               width=8, height=8)
 
 
-if __name__ in ("__main__", "panel_setup_module"):
-    print(f"cosymp app warm-up: kernels and plotting stack ready in {warm():.1f} s", flush=True)
+if __name__ == "__main__":
+    from cosymp.cli import main
+
+    raise SystemExit(main(["compile"]))
+if __name__ == "panel_setup_module":
+    print(f"cosymp app warm-up: ready in {prepare():.1f} s", flush=True)

@@ -1,4 +1,4 @@
-"""The `cosymp` command line: run, scenes, methods, workprecision, report, bench.
+"""The `cosymp` command line: run, scenes, methods, workprecision, report, sweep, compile, bench.
 
 Exit codes: 0 done, 2 bad input (one line on stderr saying what to change), 3 a run that
 could not go on (overflow, Newton), also one line.
@@ -9,6 +9,7 @@ import math
 import os
 import shlex
 import sys
+import time
 
 from .errors import CosympError, InputError, RunError, one_line
 
@@ -100,6 +101,9 @@ def parser():
     sw.add_argument("-o", "--out", required=True, metavar="FILE.csv|FILE.parquet")
     sub.add_parser("scenes", help="list the scenes with their parameters and defaults")
     sub.add_parser("methods", help="list the methods")
+    c = sub.add_parser("compile", help="compile every kernel into numba's disk cache now, one process per core "
+                       "(otherwise each is compiled on first use)")
+    c.add_argument("--processes", type=int, help="worker processes (default: one per core)")
     b = sub.add_parser("bench", help="ns/step per scene and method against a C -O3 loop")
     b.add_argument("--steps", type=int, default=200_000)
     b.add_argument("--scenes", nargs="*")
@@ -300,6 +304,27 @@ def _fmt(v):
     return "(" + ", ".join(f"{x:.6g}" for x in v) + ")"
 
 
+def _compile(args, out):
+    from . import warm
+
+    if args.processes is not None and not 1 <= args.processes <= 256:
+        raise InputError(f"--processes {args.processes} must be between 1 and 256")
+
+    def report(line):
+        out.write(f"cosymp: {line}\n")
+        out.flush()
+
+    compiler = warm.compile_all(processes=args.processes, report=report)
+    if not compiler.total:
+        report("every kernel is in the cache")
+    elif compiler.failed:
+        key, why = next(iter(compiler.failed.items()))
+        raise CosympError(f"{len(compiler.failed)} of {compiler.total} groups of kernels failed to compile, "
+                          f"e.g. {key}: {why}")
+    else:
+        report(f"done in {time.perf_counter() - compiler.started:.1f} s")
+
+
 def _scenes(out):
     from .scenes import SCENES
 
@@ -337,6 +362,8 @@ def main(argv=None, out=None, err=None):
             _report(args, out, err)
         elif args.command == "sweep":
             _sweep(args, out, err)
+        elif args.command == "compile":
+            _compile(args, out)
         else:
             from .bench import bench
 

@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 
+from . import warm
 from .errors import RunError
 from .integrate import failure_message
 from .kernels.families import OK
@@ -51,6 +52,7 @@ def tangent_maps(traj, member=0, last=False):
     otherwise). `last` adds the map of one more step from the final record.
     """
     s = traj.setup
+    warm.ensure(s)
     z = np.ascontiguousarray(traj.z[:, member])
     pt = np.ascontiguousarray(traj.pt[:, member])
     t = np.ascontiguousarray(traj.t)

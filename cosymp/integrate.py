@@ -5,6 +5,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import warm
 from .errors import InputError, RunError, as_number, quoted
 from .kernels.families import NEWTON, OK, OVERFLOW, SINGULAR
 from .kernels.loops import energies, propagate
@@ -143,6 +144,7 @@ def simulate(setup, h, T, z0=None, stride=None, increments=False, t0=0.0, pt0=No
     """
     steps = check_step(h, T)
     Z = initial_states(setup, z0)
+    warm.ensure(setup)
     N, m = Z.shape
     per_record = N * (m + 1) * (3 if increments else 1)
     if stride is None:

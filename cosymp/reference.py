@@ -3,6 +3,7 @@ import math
 
 import numpy as np
 
+from . import warm
 from .diagnostics import norm
 from .errors import InputError
 from .integrate import MAX_STEPS, Setup, check_step, initial_states, simulate
@@ -50,6 +51,7 @@ def scipy_reference(setup, T, z0=None, rtol=1e-13, atol=1e-13, t_eval=None, meth
     from scipy.integrate import solve_ivp
 
     Z = initial_states(setup, z0)
+    warm.ensure(setup)
     P = setup.P
     m = Z.shape[1]
     H0 = np.empty((1, 1))

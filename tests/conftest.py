@@ -1,15 +1,24 @@
 """Shared lists: every scene x method pair the tests iterate, built from the registries.
 
-A new scene or method is tested by being added to its registry.
+A new scene or method is tested by being added to its registry. On a cold numba cache every
+kernel is compiled first, in one process per core (cosymp.warm), instead of test by test.
 """
 import numpy as np
 import pytest
 
+from cosymp import warm
 from cosymp.integrate import Setup
 from cosymp.methods import METHODS
 from cosymp.scenes import SCENES
 
 THETAS = {"theta": (0.0, 0.3, 0.5, 1.0), "theta-naive": (0.3, 0.5)}
+
+
+def pytest_sessionstart(session):
+    if not warm.is_warm():
+        terminal = session.config.pluginmanager.get_plugin("terminalreporter")
+        compiler = warm.compile_all(report=lambda line: terminal.write_line(f"cosymp compile {line}"))
+        assert not compiler.failed, compiler.failed
 
 
 def pairs(methods=None, scenes=None, linear_only=False):

@@ -1,8 +1,8 @@
 """Diagnostics: the paper's estimators as printed, the rigorous companions, and the reference."""
 import numpy as np
 import pytest
-from conftest import setup
 
+from conftest import setup
 from cosymp.diagnostics import (
     det_deviation,
     loop_action,

@@ -1,8 +1,8 @@
 """Runs that cannot go on stop with a message naming the step and the time, keeping the data."""
 import numpy as np
 import pytest
-from conftest import setup
 
+from conftest import setup
 from cosymp.errors import RunError
 from cosymp.integrate import simulate
 

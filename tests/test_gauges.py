@@ -1,8 +1,8 @@
 """Gauges built from chi: defining conditions, field invariance, H' o G = H, and runs."""
 import numpy as np
 import pytest
-from conftest import setup
 
+from conftest import setup
 from cosymp.integrate import simulate
 from cosymp.kernels.loops import energies
 from cosymp.scenes import charged

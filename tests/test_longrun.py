@@ -1,8 +1,8 @@
 """The paper's long horizons: H + p_t bounded for structure-preserving methods, drifting for RK4."""
 import numpy as np
 import pytest
-from conftest import setup
 
+from conftest import setup
 from cosymp.integrate import simulate
 
 LONG = [("modulated", {}, 2e5), ("damped", {"gamma": 2e-4}, 5e5)]

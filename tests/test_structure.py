@@ -1,8 +1,8 @@
 """Volume and symplecticity of the one-step maps, against known values."""
 import numpy as np
 import pytest
-from conftest import case_id, pairs, setup, structure_preserving
 
+from conftest import case_id, pairs, setup, structure_preserving
 from cosymp.diagnostics import det_deviation, symplecticity_defect, tangent_maps
 from cosymp.integrate import simulate
 

@@ -1,0 +1,85 @@
+"""The numba internals cosymp relies on, checked one by one with a message saying what changed.
+
+pyproject.toml bounds numba and llvmlite to the versions these pass on. A newer numba may move
+or rename any of them; this file says which, before a kernel fails in an obscure way.
+"""
+import importlib.metadata
+import inspect
+
+import numpy as np
+import pytest
+from numba import njit, types
+from numba.core import caching, cgutils
+from numba.core.errors import NumbaError
+from numba.extending import overload
+from numba.np import arrayobj
+from packaging.requirements import Requirement
+from packaging.specifiers import SpecifierSet
+
+from cosymp.kernels import cachestamp
+from cosymp.kernels.borrow import borrow
+from cosymp.kernels.stack import stack_array
+
+WHERE = {
+    "caching": "cosymp/kernels/cachestamp.py",
+    "stack": "cosymp/kernels/stack.py",
+    "borrow": "cosymp/kernels/borrow.py",
+    "dispatch": "cosymp/kernels/dispatch.py",
+}
+
+
+def changed(what, where):
+    return (f"numba {importlib.metadata.version('numba')} changed {what}, which {WHERE[where]} relies on: "
+            "install the numba version pyproject.toml names, or update that module")
+
+
+def test_the_installed_versions_are_within_the_pins():
+    reqs = {r.name: r for r in map(Requirement, importlib.metadata.requires("cosymp"))}
+    for name in ("numba", "llvmlite"):
+        spec = reqs[name].specifier if name in reqs else SpecifierSet()
+        assert any(s.operator == "<" for s in spec), f"pyproject.toml must bound {name} from above"
+        assert importlib.metadata.version(name) in spec, f"{name} {importlib.metadata.version(name)} is not {spec}"
+
+
+def test_the_cache_internals_are_where_cachestamp_expects_them():
+    impl = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl", None)
+    assert impl is not None and isinstance(getattr(impl, "_locator_classes", None), list), \
+        changed("the cache implementation's list of locators (CacheImpl._locator_classes)", "caching")
+    assert cachestamp.PackageStampLocator in impl._locator_classes, changed("how locators are chosen", "caching")
+    index = caching.IndexDataCacheFile(cache_path="/nonexistent", filename_base="probe", source_stamp="s")
+    for name in ("_cache_path", "_index_path", "_load_index", "_save_index", "_save_data", "_data_name"):
+        assert hasattr(index, name), changed(f"IndexDataCacheFile.{name}", "caching")
+    assert list(inspect.signature(caching.IndexDataCacheFile.save).parameters) == ["self", "key", "data"], \
+        changed("IndexDataCacheFile.save's signature", "caching")
+    assert caching.IndexDataCacheFile.save is cachestamp._save, changed("where a cache entry is saved", "caching")
+
+
+def test_the_code_generation_helpers_exist():
+    for module, name, where in ((cgutils, "alloca_once", "stack"), (cgutils, "get_null_value", "borrow"),
+                                (arrayobj, "make_array", "stack"), (arrayobj, "populate_array", "stack")):
+        assert callable(getattr(module, name, None)), changed(f"{module.__name__}.{name}", where)
+    assert hasattr(types, "IntegerLiteral"), changed("types.IntegerLiteral", "stack")
+    assert {"jit_options", "inline", "strict"} <= set(inspect.signature(overload).parameters), \
+        changed("overload's options (jit_options, inline, strict)", "dispatch")
+
+
+@njit
+def _stack_and_borrow(x):
+    buf = stack_array((3, 2), x)
+    for i in range(3):
+        for j in range(2):
+            buf[i, j] = x[i] * (j + 1)
+    y = borrow(x)
+    total = 0.0
+    for i in range(3):
+        total += buf[i, 0] + buf[i, 1] + y[i]
+    return total, buf.shape[0], buf.strides[0]
+
+
+def test_stack_arrays_and_borrowed_arrays_compile_and_hold_their_values():
+    try:
+        total, rows, stride = _stack_and_borrow(np.array([1.0, 2.0, 3.0]))
+    except (NumbaError, TypeError, AttributeError) as e:
+        pytest.fail(changed(f"code generation for stack arrays or borrowed arrays ({type(e).__name__}: {e})",
+                            "stack"))
+    assert (total, rows, stride) == (24.0, 3, 16)
