@@ -1116,6 +1116,15 @@ MAP_AXES = {
 }
 
 
+def map_axes(scene):
+    """The Stability map's first axes for a scene: its MAP_AXES entry, else h on a log axis around
+    the scene's step by its first parameter that is not an initial condition, over its slider range."""
+    if scene.name in MAP_AXES:
+        return MAP_AXES[scene.name]
+    p = next(p for p in scene.params if not p.initial and not p.choices and not isinstance(p.default, str))
+    return ("h", scene.h / 4, 8 * scene.h, True), (p.name, *soft_range(p), False)
+
+
 def map_bytes(scene, points_steps, threads):
     """What a sweep holds at once: per thread one chunk of every-step records (t, z, p_t, H), its
     copy for the tangent maps and the maps (2n x 2n each), plus the grid's results."""
@@ -1153,7 +1162,7 @@ class StabilityMap(Background):
         self.param.x.objects = self.param.y.objects = names
         if events and all(e.name == "method" for e in events) and {self.x, self.y} <= set(names):
             return
-        (xn, x0, x1, xl), (yn, y0, y1, yl) = MAP_AXES[self.study.scene]
+        (xn, x0, x1, xl), (yn, y0, y1, yl) = map_axes(self.study.scene_obj)
         self.param.update(x=xn, x_start=x0, x_stop=x1, x_log=xl, y=yn, y_start=y0, y_stop=y1, y_log=yl)
 
     def _job(self):

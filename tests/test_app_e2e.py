@@ -19,6 +19,7 @@ from cosymp.scenes import SCENES
 WAIT_MS = 20_000
 
 pytestmark = [
+    pytest.mark.slow,
     pytest.mark.skipif(not shutil.which(CHROMIUM), reason=f"no Chromium at {CHROMIUM} (apt-get install it)"),
     pytest.mark.timeout(START_TIMEOUT_S + 120),
 ]

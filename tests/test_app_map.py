@@ -1,4 +1,5 @@
 """The app's Stability map state (app.state.StabilityMap) and its heat map, without a server."""
+import dataclasses
 import math
 import tracemalloc
 
@@ -9,6 +10,7 @@ import pytest
 from app import state, views
 from app.state import MAP_AXES, StabilityMap, Study
 from cosymp import sweep
+from cosymp.scenes import SCENES
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -28,13 +30,34 @@ def tongue():
 def test_each_scene_gets_its_default_axes_and_the_study_names_its_choices():
     s = Study()
     m = StabilityMap(study=s)
-    for scene, ((xn, x0, x1, xl), (yn, y0, y1, yl)) in MAP_AXES.items():
-        s.scene = scene
+    for scene in SCENES.values():
+        s.scene = scene.name
+        (xn, x0, x1, xl), (yn, y0, y1, yl) = state.map_axes(scene)
         assert (m.x, m.x_start, m.x_stop, m.x_log, m.y, m.y_start, m.y_stop, m.y_log) == (xn, x0, x1, xl, yn, y0, y1, yl)
         numeric = [p.name for p in s.scene_obj.params if not p.choices and not isinstance(p.default, str)]
         assert m.param.x.objects == numeric + ["h", "T"]
+        assert xn != yn and {xn, yn} <= set(numeric + ["h", "T"]) and x0 < x1 and y0 < y1
+        if scene.name in MAP_AXES:
+            assert state.map_axes(scene) == MAP_AXES[scene.name]
     s.method = "theta"
     assert m.param.x.objects[-1] == "theta" and (m.x, m.y) == ("nu", "a")
+
+
+@pytest.mark.parametrize("scene", list(SCENES))
+def test_every_scene_opens_on_a_map_that_computes(scene):
+    """The first map of every registered scene (a 3 x 3 grid of it) runs without a failed cell."""
+    s = Study(scene=scene)
+    m = StabilityMap(study=s, nx=3, ny=3)
+    m.start()
+    assert m.status.startswith("done") and m.result.values[m.measure].shape == (3, 3)
+    assert (m.result.status == "ok").all(), m.result.failures()
+
+
+def test_a_scene_without_a_map_entry_gets_h_against_its_first_parameter():
+    scene = SCENES["kapitza"]
+    bare = dataclasses.replace(scene, name="bare")
+    (xn, x0, x1, xl), (yn, y0, y1, yl) = state.map_axes(bare)
+    assert (xn, xl, yn, yl) == ("h", True, "w0", False) and x0 < scene.h < x1 and (y0, y1) == state.soft_range(scene.params[0])
 
 
 def test_the_map_shows_the_principal_tongue_where_the_theory_puts_it(tongue):

@@ -349,6 +349,7 @@ def test_a_closed_page_draws_nothing_more_and_holds_no_memory(monkeypatch):
     assert s.results is shown and budget.used == 0
 
 
+@pytest.mark.slow
 def test_a_cancelled_long_run_frees_its_chunks_and_its_lease(monkeypatch):
     """The paper's 5e6-step run cancelled at a third, twice (the second is measured: the first
     loads compiled code for good): the lease is given back, and what stays on the heap is the

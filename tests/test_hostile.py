@@ -492,6 +492,7 @@ def cli_folder():
     shutil.rmtree(folder, ignore_errors=True)
 
 
+@pytest.mark.slow
 @settings(max_examples=1000, deadline=5000, **SETTINGS)
 @given(data=st.data())
 def test_cli_exits_0_2_or_3_with_one_line_on_error(cli_folder, data):

@@ -122,6 +122,7 @@ EXECUTOR_THREADS = min(32, (os.cpu_count() or 1) + 4)
 OTHER_THREADS = 1
 
 pytestmark = [
+    pytest.mark.slow,
     pytest.mark.skipif(not shutil.which(CHROMIUM), reason=f"no Chromium at {CHROMIUM} (apt-get install it)"),
     pytest.mark.timeout(START_TIMEOUT_S + 300),
 ]

@@ -5,6 +5,8 @@ import pytest
 from conftest import setup
 from cosymp.integrate import simulate
 
+pytestmark = pytest.mark.slow
+
 LONG = [("modulated", {}, 2e5), ("damped", {"gamma": 2e-4}, 5e5)]
 
 

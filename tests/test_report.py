@@ -95,6 +95,21 @@ def test_scene_report_from_the_command_line(tmp_path):
     assert x0 < y0 < y1 < x1
 
 
+def test_the_quick_paper_report_has_every_section():
+    """The paper report without its long runs and work-precision diagram (the slow tier renders
+    and opens the whole one)."""
+    from cosymp.report.paper import paper_report
+
+    report = paper_report(long=False, work_precision=False)
+    assert [s.title.split(":")[0] for s in report.sections] == ["Section 4.1", "Section 4.2", "Section 5",
+                                                                "Work against precision"]
+    for section in report.sections[:3]:
+        figures = [i for i in section.items if isinstance(i, Figure)]
+        assert figures and all(f.series for f in figures), section.title
+        assert all(np.isfinite(np.asarray(s.y, float)).any() for f in figures for s in f.series), section.title
+
+
+@pytest.mark.slow
 def test_paper_report(tmp_path):
     path = tmp_path / "paper.html"
     out, err = io.StringIO(), io.StringIO()

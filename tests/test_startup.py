@@ -3,6 +3,8 @@ import json
 import subprocess
 import sys
 
+import pytest
+
 SCRIPT = """
 import json, time
 t0 = time.perf_counter()
@@ -25,6 +27,7 @@ def fresh_process():
     return json.loads(r.stdout.strip().splitlines()[-1])
 
 
+@pytest.mark.slow
 def test_second_process_loads_every_kernel_from_the_cache():
     fresh_process()
     warm = fresh_process()

@@ -384,6 +384,7 @@ def test_inprocess_threads_equal_a_serial_evaluation(inprocess):
     assert np.all(np.isnan(r.values["growth"][-1])) and np.all(np.isfinite(r.values["growth"][:-1]))
 
 
+@pytest.mark.slow
 def test_dask_cluster_gives_identical_figures(inprocess, cluster):
     p, r = inprocess
     d = sweep.run(p, scheduler=cluster.scheduler_address)
@@ -392,6 +393,7 @@ def test_dask_cluster_gives_identical_figures(inprocess, cluster):
     assert len(d.task_seconds) >= 2
 
 
+@pytest.mark.slow
 def test_dask_progress_exception_propagates_and_cluster_stays_usable(cluster):
     p = sweep.plan("modulated", "midpoint", ["eps=0:0.4:4", "alpha=1.8:2.2:5"], ["growth"], T=20.0)
 
@@ -407,6 +409,7 @@ def test_dask_progress_exception_propagates_and_cluster_stays_usable(cluster):
     assert_same(sweep.run(p), sweep.run(p, scheduler=cluster.scheduler_address))
 
 
+@pytest.mark.slow
 def test_own_local_cluster_gives_identical_figures(inprocess):
     pytest.importorskip("distributed")
     p, r = inprocess
@@ -565,6 +568,7 @@ def test_cli_unwritable_output_is_one_line_error(tmp_path):
     assert code == 2 and one_line_error(err), err
 
 
+@pytest.mark.slow
 def test_cli_unreachable_scheduler_is_a_one_line_error(tmp_path):
     """Nothing listens on port 1: a one-line error within the client's 10 s timeout, no hang."""
     pytest.importorskip("distributed")
