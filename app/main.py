@@ -1,116 +1,107 @@
-"""The cosymp app: composition of the state objects and views into a page.
+"""The cosymp app: one page per browser session, composed from the registry of features.
 
-Serve it with `panel serve app` (or `panel serve app --setup app/warmup.py`, which loads every
-compiled kernel before the first page). Everything is served from this server: the Bootstrap
-template, KaTeX and BokehJS come from Panel's and Bokeh's bundled resources.
+Serve it with `panel serve app --setup app/warmup.py` (app/warmup.py makes the compiled kernels
+ready first). Everything is served from this server: the Bootstrap template, KaTeX, Tabulator and
+BokehJS come from Panel's and Bokeh's bundled resources.
 """
 import html
 import io
-from functools import partial
 from pathlib import Path
 
-import holoviews as hv
 import panel as pn
 import param
 
 from cosymp.errors import InputError, RunError
 
-from .allocator import map_large_blocks
-from .presets import query_items
-from .state import (
-    LONG_URL_NAMES,
-    URL_NAMES,
-    VIEWS,
-    GaugeStudy,
-    LongHorizons,
-    LongRun,
-    Note,
-    Playback,
-    StabilityMap,
-    Study,
-    ThetaLesson,
-    WorkPrecision,
-    log_when_freed,
-    study_report,
-)
-from .views import (
-    CloudView,
-    Controls,
-    GaugeView,
-    LongRunView,
-    OrbitsView,
-    PlayView,
-    PresetLinks,
-    SceneInfo,
-    StabilityMapView,
-    StructureView,
-    ThetaView,
-    WorkPrecisionView,
-)
+from .features import FEATURES
+from .jobs import Note
+from .memory import log_when_freed, map_large_blocks
+from .presets import URL_NAMES, parse_items, query_items
+from .study import Controls, PresetLinks, SceneInfo, Study, study_report
 from .warmup import prepare
 
 ASSETS = Path(__file__).resolve().parent.parent / "assets"
-NOTIFY_MS = {"error": 10000, "warning": 10000, "info": 6000}
+NOTIFY_MS = {"error": 8000, "warning": 6000, "info": 4000}
 
 
 class App(param.Parameterized):
-    """One session: the state objects (first computed from the link's settings), their views,
-    URL sync and notifications."""
+    """One session: the study (first computed from the link's settings), each feature's state and
+    view, the URL and the notifications."""
 
     def __init__(self, **params):
         super().__init__(**params)
         prepare(preload=False)
-        query = pn.state.location.query_params if pn.state.location is not None else {}
-        self._pending = []
-        self._stopped = False
         map_large_blocks()
         log_when_freed(self)
-        try:
-            self.study = Study(**{k: query[u] for k, u in URL_NAMES.items() if u in query})
-        except (ValueError, TypeError, InputError) as err:
-            self._pending.append(Note("error", f"the link's settings could not be applied ({err}); "
-                                               "showing the defaults"))
-            self.study = Study()
-        if self.study.message is not None:
-            self._pending.append(self.study.message)
-        self.gauges = GaugeStudy(study=self.study)
-        self.lesson = ThetaLesson(study=self.study)
-        self.playback = Playback()
-        self.long = LongRun(study=self.study)
-        self.measure = WorkPrecision(study=self.study)
-        self.horizons = LongHorizons(study=self.study)
-        self.stability = StabilityMap(study=self.study)
-        self.study.param.watch(self._on_message, "message")
-        s = self.study
-        views = {"compare": partial(OrbitsView, study=s), "structure": partial(StructureView, study=s),
-                 "cloud": partial(CloudView, study=s), "gauges": partial(GaugeView, gauges=self.gauges),
-                 "theta": partial(ThetaView, lesson=self.lesson),
-                 "play": partial(PlayView, study=s, playback=self.playback),
-                 "long": partial(LongRunView, long=self.long),
-                 "workprecision": partial(WorkPrecisionView, measure=self.measure, long=self.horizons),
-                 "map": partial(StabilityMapView, stability=self.stability)}
-        names = list(VIEWS.values())
-        # Each tab is built when first shown (dynamic tabs render only the active one).
-        self.tabs = pn.Tabs(*[(label, pn.param.ParamFunction(pn.bind(views[name]), lazy=True))
-                              for label, name in VIEWS.items()],
-                            active=names.index(s.view), dynamic=True, sizing_mode="stretch_width")
+        self._pending = []
+        self._stopped = False
+        query = pn.state.location.query_params if pn.state.location is not None else {}
+        self.study = self._study(query)
+        self.states = {f.name: f.state(self.study) if f.state else None for f in FEATURES}
+        for f in (f for f in FEATURES if f.url):
+            values, bad = parse_items(query, f.url)
+            try:
+                self.states[f.name].param.update(**values)
+            except (ValueError, TypeError) as err:
+                bad.append(str(err))
+            if bad:
+                self._pending.append(Note("error", f"the link's {', '.join(bad)} could not be applied: showing the "
+                                                   "defaults"))
+        self.views = {f.name: f.view(self.study, self.states[f.name]) for f in FEATURES}
+        names = [f.name for f in FEATURES]
+        self.tabs = pn.Tabs(*[(f.label, pn.Column(sizing_mode="stretch_width")) for f in FEATURES],
+                            active=names.index(self.study.view), sizing_mode="stretch_width")
+        self._show(self.study.view)
         self.tabs.param.watch(lambda e: setattr(self.study, "view", names[e.new]), "active")
-        self.study.param.watch(lambda e: setattr(self.tabs, "active", names.index(e.new)), "view")
-        if pn.state.location is not None:
-            pn.state.location.sync(self.study, URL_NAMES, on_error=self._bad_url)
-            pn.state.location.sync(self.long, LONG_URL_NAMES, on_error=self._bad_url)
+        self.study.param.watch(self._on_view, "view")
+        self.study.param.watch(self._on_message, "message")
+        self.study.param.watch(lambda e: self._write_url(), "results")
+        for f in FEATURES:
+            if f.url:
+                self.states[f.name].param.watch(lambda e: self._write_url(), list(f.url))
         pn.state.onload(self._flush)
         pn.state.on_session_destroyed(self._stop)
 
+    def _study(self, query):
+        """The study the link asks for; what cannot be applied is said, and the defaults stand in."""
+        values, bad = parse_items(query, URL_NAMES)
+        if values.get("view", "compare") not in {f.name for f in FEATURES}:
+            bad.append(f"view={values.pop('view')}")
+        try:
+            study = Study(**values)
+        except (ValueError, TypeError, InputError) as err:
+            bad.append(str(err))
+            study = Study()
+        if bad:
+            self._pending.append(Note("error", f"the link's settings {', '.join(bad)} could not be applied: showing "
+                                               "the defaults"))
+        if study.message is not None:
+            self._pending.append(study.message)
+        return study
+
+    def _show(self, name):
+        """Show a feature's tab: its view is built the first time, and drawn if its data changed."""
+        box = self.tabs[[f.name for f in FEATURES].index(name)]
+        view = self.views[name]
+        if not len(box):
+            box.append(view)
+        view.shown()
+
+    def _on_view(self, event):
+        names = [f.name for f in FEATURES]
+        if self.tabs.active != names.index(event.new):
+            self.tabs.active = names.index(event.new)
+        self._show(event.new)
+        self._write_url()
+
     def _stop(self, session_context):
-        """A closed page stops its background runs (the long run after its current chunk, the
-        measurements before their next run) and gives back the memory of its results; nothing
+        """A closed page stops its background runs and gives back the memory of its results; nothing
         is drawn or notified for it any more."""
         self._stopped = True
-        for background in (self.measure, self.horizons, self.stability):
-            background.cancel()
-        for derived in (self.long, self.study, self.gauges, self.lesson, self.stability):
-            derived.release()
+        for state in self.states.values():
+            if state is not None:
+                state.release()
+        self.study.release()
 
     def _on_message(self, event):
         if event.new is not None:
@@ -120,19 +111,21 @@ class App(param.Parameterized):
         if pn.state.notifications is not None and not self._stopped:
             getattr(pn.state.notifications, level)(text, duration=NOTIFY_MS[level])
 
+    def _write_url(self):
+        """The URL holds the state of the shown results (only ever a valid one), so a copied link
+        reopens them."""
+        if pn.state.location is None or self.study.results is None:
+            return
+        items = query_items(self.study.state(), URL_NAMES)
+        for f in FEATURES:
+            items.update(query_items({k: getattr(self.states[f.name], k) for k in f.url}, f.url))
+        pn.state.location.update_query(**items)
+
     def _flush(self):
-        """On load: write the whole state into the URL (so a copied link reopens it) and post the
-        messages of the session's start."""
-        if pn.state.location is not None:
-            pn.state.location.update_query(
-                **query_items({k: getattr(self.study, k) for k in URL_NAMES}, URL_NAMES),
-                **query_items({k: getattr(self.long, k) for k in LONG_URL_NAMES}, LONG_URL_NAMES))
+        """On load: write the state into the URL and post the messages of the session's start."""
+        self._write_url()
         for note in self._pending:
             self._notify(note.level, note.text)
-
-    def _bad_url(self, values):
-        self._notify("error", f"the link's settings {values} could not be applied: check the scene, method "
-                              "and parameter names and values")
 
     def _report(self):
         """The report file of the current comparison; bad input becomes a message and a file saying so."""
@@ -147,7 +140,7 @@ class App(param.Parameterized):
         share = pn.widgets.Button(name="Copy link to this view", sizing_mode="stretch_width")
         share.js_on_click(code="navigator.clipboard.writeText(window.location.href);"
                                "cb_obj.label = 'Link copied';")
-        busy = self.study.param.busy
+        busy = self.study.param.running
         spinner = pn.indicators.LoadingSpinner(value=busy, visible=busy, size=24)
         download = pn.widgets.FileDownload(callback=self._report, filename="cosymp-report.html",
                                            label="Download report (HTML)", button_type="primary",
@@ -161,6 +154,5 @@ class App(param.Parameterized):
         )
 
 
-pn.extension("katex", notifications=True, design="bootstrap")
-hv.extension("bokeh", logo=False)
+pn.extension("katex", "tabulator", notifications=True, design="bootstrap")
 App().template().servable(title="cosymp")

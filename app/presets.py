@@ -1,9 +1,10 @@
 """Presets: the paper's figures with their printed parameters, the Kapitza pendulum, and the
 hard cases (where the paper's gentle parameters are left behind; tests/test_hard_cases.py
-asserts what each shows).
+asserts what each shows); and the URL that holds the app's state.
 
-A preset is a set of app-state values; its link is the URL that opens the app in that state
-(the same query the app writes with `pn.state.location.sync`).
+A preset is a set of app-state values; its link is the URL that opens the app in that state,
+in the one format the app writes: text as it is, numbers and the scene's parameters as JSON,
+numbers with at most 10 significant digits.
 """
 import json
 from dataclasses import dataclass, field
@@ -12,11 +13,40 @@ from urllib.parse import urlencode
 from cosymp.scenes import SCENES
 
 LONG_HORIZONS = {"damped": 5e5, "modulated": 2e5}
+URL_NAMES = {"scene": "scene", "method": "method", "other": "vs", "theta": "theta", "h": "h", "T": "T",
+             "values": "p", "view": "view"}
+TEXT = ("scene", "method", "other", "view")
+
+
+def rounded(v):
+    """A value as the URL carries it: floats (also inside a dict) to 10 significant digits."""
+    if isinstance(v, float):
+        return float(f"{v:.10g}")
+    if isinstance(v, dict):
+        return {k: rounded(x) for k, x in v.items()}
+    return v
 
 
 def query_items(values, names):
-    """URL query items of app-state values, serialized as `pn.state.location.sync` does."""
-    return {names[k]: v if isinstance(v, str) else json.dumps(v) for k, v in values.items()}
+    """URL query items of app-state values (see the module's doc)."""
+    return {names[k]: v if k in TEXT else json.dumps(rounded(v), separators=(",", ":")) for k, v in values.items()}
+
+
+def parse_items(query, names):
+    """App-state values from URL query items: ({name: value}, [what could not be read])."""
+    out, bad = {}, []
+    for k, u in names.items():
+        if u not in query:
+            continue
+        text = query[u]
+        if k in TEXT:
+            out[k] = text
+            continue
+        try:
+            out[k] = json.loads(text)
+        except ValueError:
+            bad.append(f"{u}={text[:40]}")
+    return out, bad
 
 
 def long_horizon(scene):
@@ -40,11 +70,11 @@ class Preset:
     group: str = PAPER
     fails: tuple = ()
 
-    def query(self, url_names, long_names):
+    def query(self):
         """The URL query string (with '?') that opens the app in this preset's state."""
-        items = query_items(self.state, url_names)
+        items = query_items(self.state, URL_NAMES)
         if self.T_long is not None:
-            items.update(query_items({"T_long": self.T_long}, long_names))
+            items["T_long"] = json.dumps(self.T_long)
         return "?" + urlencode(items)
 
 

@@ -1,4 +1,4 @@
-"""app/allocator.py: freed memory goes back to the system.
+"""app/memory.py: freed memory goes back to the system.
 
 The pattern of a server thread: it frees a large array (glibc then raises its mmap threshold to
 that size), allocates 100 arrays of 2 MiB with small blocks kept in between, and frees the
@@ -14,14 +14,14 @@ from pathlib import Path
 
 import pytest
 
-from app import allocator
+from app import memory as allocator
 
 pytestmark = pytest.mark.skipif(allocator._glibc() is None, reason="the C library is not glibc")
 
 PROBE = """
 import json, sys, threading
 import numpy as np
-from app import allocator
+from app import memory as allocator
 
 def rss_mb():
     with open("/proc/self/status") as f:

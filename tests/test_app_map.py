@@ -1,44 +1,41 @@
-"""The app's Stability map state (app.state.StabilityMap) and its heat map, without a server."""
+"""The app's Stability map (app.features.stabilitymap) and its heat map, without a server."""
 import dataclasses
 import math
 import tracemalloc
 
-import holoviews as hv
 import numpy as np
 import pytest
 
-from app import state, views
-from app.state import MAP_AXES, StabilityMap, Study
+from app import memory
+from app.features import stabilitymap as maps
+from app.features.stabilitymap import MAP_AXES, StabilityMap
+from app.study import Study, soft_range
 from cosymp import sweep
+from cosymp import workprecision as wp
 from cosymp.scenes import SCENES
-
-
-@pytest.fixture(scope="module", autouse=True)
-def plotting_backend():
-    hv.extension("bokeh")
 
 
 @pytest.fixture(scope="module")
 def tongue():
     """The modulated scene's default axes (alpha x eps) at 9 x 5 cells, growth of midpoint."""
     s = Study(scene="modulated")
-    m = StabilityMap(study=s, nx=9, ny=5)
+    m = StabilityMap(s, nx=9, ny=5)
     m.start()
     return s, m
 
 
 def test_each_scene_gets_its_default_axes_and_the_study_names_its_choices():
     s = Study()
-    m = StabilityMap(study=s)
+    m = StabilityMap(s)
     for scene in SCENES.values():
         s.scene = scene.name
-        (xn, x0, x1, xl), (yn, y0, y1, yl) = state.map_axes(scene)
+        (xn, x0, x1, xl), (yn, y0, y1, yl) = maps.map_axes(scene)
         assert (m.x, m.x_start, m.x_stop, m.x_log, m.y, m.y_start, m.y_stop, m.y_log) == (xn, x0, x1, xl, yn, y0, y1, yl)
         numeric = [p.name for p in s.scene_obj.params if not p.choices and not isinstance(p.default, str)]
         assert m.param.x.objects == numeric + ["h", "T"]
         assert xn != yn and {xn, yn} <= set(numeric + ["h", "T"]) and x0 < x1 and y0 < y1
         if scene.name in MAP_AXES:
-            assert state.map_axes(scene) == MAP_AXES[scene.name]
+            assert maps.map_axes(scene) == MAP_AXES[scene.name]
     s.method = "theta"
     assert m.param.x.objects[-1] == "theta" and (m.x, m.y) == ("nu", "a")
 
@@ -47,7 +44,7 @@ def test_each_scene_gets_its_default_axes_and_the_study_names_its_choices():
 def test_every_scene_opens_on_a_map_that_computes(scene):
     """The first map of every registered scene (a 3 x 3 grid of it) runs without a failed cell."""
     s = Study(scene=scene)
-    m = StabilityMap(study=s, nx=3, ny=3)
+    m = StabilityMap(s, nx=3, ny=3)
     m.start()
     assert m.status.startswith("done") and m.result.values[m.measure].shape == (3, 3)
     assert (m.result.status == "ok").all(), m.result.failures()
@@ -56,8 +53,8 @@ def test_every_scene_opens_on_a_map_that_computes(scene):
 def test_a_scene_without_a_map_entry_gets_h_against_its_first_parameter():
     scene = SCENES["kapitza"]
     bare = dataclasses.replace(scene, name="bare")
-    (xn, x0, x1, xl), (yn, y0, y1, yl) = state.map_axes(bare)
-    assert (xn, xl, yn, yl) == ("h", True, "w0", False) and x0 < scene.h < x1 and (y0, y1) == state.soft_range(scene.params[0])
+    (xn, x0, x1, xl), (yn, y0, y1, yl) = maps.map_axes(bare)
+    assert (xn, xl, yn, yl) == ("h", True, "w0", False) and x0 < scene.h < x1 and (y0, y1) == soft_range(scene.params[0])
 
 
 def test_the_map_shows_the_principal_tongue_where_the_theory_puts_it(tongue):
@@ -78,7 +75,7 @@ def test_the_map_shows_the_principal_tongue_where_the_theory_puts_it(tongue):
 def test_the_map_equals_the_command_lines_sweep(tongue):
     """What the view shows is cosymp.sweep's result for the plan its command line names."""
     _, m = tongue
-    cmd = views.map_command(m.result.plan)
+    cmd = maps.map_command(m.result.plan)
     assert cmd.startswith("cosymp sweep modulated --method midpoint --vary alpha=0.5:4.5:9 --vary eps=0:0.8:5")
     again = sweep.run(sweep.plan("modulated", "midpoint", ["alpha=0.5:4.5:9", "eps=0:0.8:5"], ["growth"],
                                  h=0.1, T=50))
@@ -90,32 +87,37 @@ def test_clicking_a_cell_opens_its_run_in_the_orbits_view(tongue):
     m.open_cell(3, 4)
     plan = m.result.plan
     assert s.view == "compare" and s.method == "midpoint"
-    assert s.values == {"alpha": plan.axes[0].values[3], "eps": plan.axes[1].values[4]}
+    assert s.values == {"alpha": maps.significant(plan.axes[0].values[3]), "eps": maps.significant(plan.axes[1].values[4])}
     assert s.results.entries[0].comparison.run.setup.values["eps"] == plan.axes[1].values[4]
 
 
 def test_a_cell_of_an_h_axis_sets_the_step():
     s = Study(scene="decaying")
-    m = StabilityMap(study=s, nx=3, ny=2, measure="error_final")
+    m = StabilityMap(s, nx=3, ny=2, measure="error_final")
     m.start()
     assert m.result.plan.axes[0].log and m.result.plan.axes[0].name == "h"
     m.open_cell(2, 1)
     assert s.h == m.result.plan.axes[0].values[2] == 3.0 and s.values == {"lam": 5.0}
 
 
-def test_the_heat_map_taps_to_the_nearest_cell_and_marks_failures(tongue):
+def test_the_heat_map_taps_to_the_cell_under_the_click_and_marks_failures(tongue):
     _, m = tongue
     opened = []
-    pane = views.map_plot(m.result, lambda i, j: opened.append((i, j)))
-    mesh = pane.object
-    assert isinstance(mesh, hv.QuadMesh) and mesh.vdims[0].name == "growth"
-    tap = hv.streams.Stream.registry[mesh][0]
-    tap.event(x=2.05, y=0.39)
+    plot = maps.MapPlot(False, False, False, lambda i, j: opened.append((i, j)))
+    plot.set(m.result)
+    data = plot.source.data
+    assert len(data["z"]) == 45 and np.array_equal(np.sort(data["z"]), np.sort(m.result.values["growth"].ravel()))
+    x, y = 2.05, 0.39
+    k = int(np.flatnonzero((data["left"] <= x) & (x < data["right"]) & (data["bottom"] <= y) & (y < data["top"]))[0])
+    plot.source.selected.indices = [k]
     assert opened == [(3, 2)]
-    assert "Every one of the 45 runs completed" in views.map_failures(m.result)
+    assert "Every one of the 45 runs completed" in maps.map_failures(m.result)
     failed = sweep.run(sweep.plan("modulated", "rk4", ["h=2:3.6:3", "eps=0:0:1"], ["growth"], T=5000))
     assert list(failed.status.ravel() != "ok") == [False, False, True]
-    assert "1 of 3 runs failed" in views.map_failures(failed) and "overflow" in views.map_failures(failed)
+    assert "1 of 3 runs failed" in maps.map_failures(failed) and "overflow" in maps.map_failures(failed)
+    plot.set(failed)
+    assert np.isnan(plot.source.data["z"]).sum() == 1, "a failed cell is drawn in the mapper's NaN colour (black)"
+    assert plot.mapper.nan_color == "black"
 
 
 @pytest.mark.parametrize("change, needle", [
@@ -138,12 +140,12 @@ def test_the_lease_bounds_the_measured_peak_and_is_given_back(monkeypatch):
     lease is at least tracemalloc's peak (numpy's arrays included) and at most four times it
     (its threads' chunks may not all peak at once); it is returned when the map is done (the
     study keeps its own comparison's lease)."""
-    budget = state.MemoryBudget(cap_bytes=1 << 32)
-    monkeypatch.setattr(state, "BUDGET", budget)
+    budget = memory.MemoryBudget(cap_bytes=1 << 32)
+    monkeypatch.setattr(memory, "BUDGET", budget)
     leased = []
     monkeypatch.setattr(budget, "lease", lambda n, what, lease=budget.lease: leased.append(n) or lease(n, what))
     s = Study(scene="charged")
-    m = StabilityMap(study=s)
+    m = StabilityMap(s)
     m.param.update(x="h", x_start=1e-4, x_stop=2e-4, x_log=False, nx=2, y="B0", y_start=0.05, y_stop=0.1, ny=2)
     s.T = 60.0
     held = budget.used
@@ -154,4 +156,4 @@ def test_the_lease_bounds_the_measured_peak_and_is_given_back(monkeypatch):
     assert m.status.startswith("done") and budget.used == held
     print(f"stability map: lease {leased[-1] / 1e6:.0f} MB, peak {peak / 1e6:.0f} MB")
     assert peak <= leased[-1] <= 4 * peak
-    assert math.ceil(60.0 / 1e-4) > state.wp.CHUNK
+    assert math.ceil(60.0 / 1e-4) > wp.CHUNK

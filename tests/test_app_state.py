@@ -1,4 +1,5 @@
-"""The app's state objects and element builders, without a server or a browser."""
+"""The app's states and views, without a server or a browser: what each view plots, the study's
+validation, the follower views, the long run, presets, and the memory budget."""
 import gc
 import json
 import pathlib
@@ -6,39 +7,47 @@ import re
 import weakref
 from urllib.parse import parse_qsl, urlsplit
 
-import holoviews as hv
 import numpy as np
 import pytest
 
-from app import state, views
-from app.presets import PRESETS
-from app.state import LONG_URL_NAMES, URL_NAMES, GaugeStudy, LongRun, Study, ThetaLesson
+from app import memory, study
+from app.features import cloud, common, gauges, longrun, orbits, structure, theta
+from app.plotting import DENSE, POINTS, Raster
+from app.presets import PRESETS, URL_NAMES, parse_items, query_items
+from app.study import Study
 from cosymp.scenes import SCENES
 
 APP = pathlib.Path(__file__).resolve().parent.parent / "app"
 
 
-@pytest.fixture(scope="module", autouse=True)
-def plotting_backend():
-    hv.extension("bokeh")
+def drawn(view):
+    """The view's layout built (as when its tab is first shown)."""
+    view.study.view = view.NAME
+    view.__panel__()
+    return view
 
 
-def curve_data(overlay):
-    """The (x, y) arrays of every curve of an overlay, concatenated."""
-    return np.concatenate([np.concatenate([el.dimension_values(0), el.dimension_values(1)])
-                           for el in overlay if len(el)])
+def plotted(pair):
+    """The (x, y) data of both slots of a Pair, concatenated."""
+    return np.concatenate([np.concatenate([s.data["x"], s.data["y"]]) for s in pair.sources.values()])
+
+
+def shown_figures(view):
+    return view._figures[view._shown]
 
 
 def test_a_parameter_change_changes_the_plotted_data():
     s = Study()
-    before = curve_data(views.energy(s.results))
-    phase_before = curve_data(views.phase(s.results, views.phase_axes("damped")[0]))
+    view = drawn(orbits.OrbitsView(s))
+    figs = shown_figures(view)
+    before, phase_before = plotted(figs.energy), plotted(figs.portraits[0][1])
     s.inputs.gamma = 0.3
     assert s.values == {"gamma": 0.3}
     assert s.results.entries[0].comparison.setup.values["gamma"] == 0.3
-    after = curve_data(views.energy(s.results))
+    after = plotted(figs.energy)
     assert before.shape != after.shape or not np.allclose(before, after)
-    assert not np.allclose(phase_before, curve_data(views.phase(s.results, views.phase_axes("damped")[0])))
+    assert not np.allclose(phase_before, plotted(figs.portraits[0][1]))
+    assert shown_figures(view) is figs, "a parameter change keeps the figures and replaces their data"
 
 
 def test_values_and_inputs_follow_each_other():
@@ -50,24 +59,26 @@ def test_values_and_inputs_follow_each_other():
     assert s.values == {"gamma": -0.1}
 
 
-def test_switching_scenes_rebuilds_the_controls():
+def test_switching_scenes_rebuilds_the_controls_and_the_portraits():
     s = Study()
+    view = drawn(orbits.OrbitsView(s))
     s.values = {"gamma": 0.3}
     s.scene = "charged"
     names = [p.name for p in SCENES["charged"].params]
     assert [n for n in s.inputs.param if n != "name"] == names
     assert (s.h, s.T, s.values) == (SCENES["charged"].h, SCENES["charged"].T, {})
-    widgets = views.scene_widgets(s.inputs)
+    widgets = study.scene_widgets(s.inputs)
     labels = [w.name for w in widgets]
     assert len(labels) == len(names) and labels[5].startswith("beta(t)") and labels[6] == "gauge"
-    assert s.results.scene == "charged" and s.shown == "charged/sparse"
-    assert len(views.phase_axes("charged")) == 3
+    assert s.results.scene == "charged" and not s.results.dense
+    assert len(common.phase_axes("charged")) == 3
+    assert view._shown == ("charged", False) and len(view.grid.objects) == 4
 
 
 def test_a_number_control_follows_its_parameter_both_ways_and_widens_to_typed_values():
     s = Study()
-    slider, box = views.scene_widgets(s.inputs)[2]
-    assert slider.label == "gamma" and (slider.start, slider.end) == s.inputs.param.gamma.softbounds
+    slider, box = study.scene_widgets(s.inputs)[2]
+    assert slider.name == "gamma" and (slider.start, slider.end) == s.inputs.param.gamma.softbounds
     slider.value = 0.5
     assert s.inputs.gamma == 0.5 and box.value == 0.5
     box.value = 7.5
@@ -76,16 +87,26 @@ def test_a_number_control_follows_its_parameter_both_ways_and_widens_to_typed_va
     assert (slider.value, slider.start, box.value) == (-4.0, -4.0, -4.0)
 
 
+def test_an_out_of_range_typed_value_is_refused_and_the_box_shows_the_last_good_one():
+    s = Study()
+    slider, box = study.scene_widgets(s.inputs)[2]
+    good = s.results
+    box.value = 1e6
+    assert s.message.level == "error" and "gamma" in s.message.text and "outside [-10, 10]" in s.message.text
+    assert (s.inputs.gamma, box.value, slider.value) == (0.2, 0.2, 0.2) and s.values == {}
+    assert s.results is good
+
+
 def test_discarded_controls_do_not_keep_the_study_alive():
     """Panel 1.9's EditableFloatSlider stays in a global registry for ever, and kept every closed
     session's Study (and its results) with it; the controls now used are collected."""
     s = Study(scene="modulated")
-    study = weakref.ref(s)
-    controls = views.scene_widgets(s.inputs)
+    ref = weakref.ref(s)
+    controls = study.scene_widgets(s.inputs)
     assert len(controls) == len(SCENES["modulated"].params)
     s = controls = None
     gc.collect()
-    assert study() is None
+    assert ref() is None
 
 
 def test_a_scene_without_the_method_falls_back_and_says_so():
@@ -108,9 +129,18 @@ def test_a_scene_without_the_method_falls_back_and_says_so():
 def test_bad_input_keeps_the_last_good_state_and_says_what_to_change(change, needle):
     s = Study(scene="charged")
     good = s.results
+    before = s.state()
     s.param.update(**change)
     assert s.results is good
     assert s.message.level == "error" and needle in s.message.text
+    assert s.state() == before, "the refused input went back to its last good value"
+
+
+def test_a_link_with_a_bad_step_shows_the_scenes_own_run_and_says_so():
+    for query in ({"h": -1.0}, {"T": 1e300}):
+        s = Study(**query)
+        assert s.results is not None and (s.h, s.T) == (SCENES["damped"].h, SCENES["damped"].T)
+        assert s.message.level == "error"
 
 
 def test_a_repeated_error_is_posted_again():
@@ -118,7 +148,7 @@ def test_a_repeated_error_is_posted_again():
     seen = []
     s.param.watch(lambda e: seen.append(e.new.text), "message")
     s.inputs.beta = "sin("
-    s.inputs.eps = 5.0
+    s.inputs.beta = "sin("
     assert len(seen) == 2 and all("beta(t)" in t for t in seen)
     s.inputs.beta = "0.05*(1 + tanh(t))"
     assert s.results.entries[0].comparison.setup.values["beta"] == "0.05*(1 + tanh(t))"
@@ -146,32 +176,49 @@ def test_an_overflowing_run_says_when():
         assert 7000 < t_end and t_fail < 7100 and -1e-6 < t_fail - t_end < 0.25  # message: 6 digits
 
 
-def test_numbers_panel_is_the_full_resolution_summary():
+def test_numbers_table_is_the_full_resolution_summary():
     s = Study(scene="charged")
-    html = views.numbers_html(s.results)
+    cols = common.numbers(s.results)
     c = s.results.entries[0].comparison
-    assert f"{c.summary['max |H + p_t|']:.3e}" in html and ">20000<" in html
+    label = s.results.entries[0].label
+    assert cols[label][0] == f"{c.summary['max |H + p_t|']:.3g}" and cols[label][4] == "20,000"
+    view = drawn(orbits.OrbitsView(s))
+    assert list(view.table.value[label]) == cols[label]
 
 
 def test_series_are_downsampled_and_dense_portraits_rasterized():
     s = Study(scene="charged")
-    dmap = views.live(views.figures()["energy"], s.param.results)
-    overlay = dmap.callback.callable()
+    view = drawn(orbits.OrbitsView(s))
     assert len(s.results.entries[0].comparison.run.t) == 20001
-    assert all(len(curve) <= views.DOWNSAMPLE_WIDTH for curve in overlay)
+    energy = shown_figures(view).energy
+    assert all(0 < len(src.data["x"]) <= POINTS for src in energy.sources.values())
+    H = s.results.entries[0].comparison.run.H_ext[:, 0]
+    y = energy.sources["A"].data["y"]
+    assert y.max() == H.max() and y.min() == H.min(), "the envelope keeps the extremes"
     s.T = 200.0
-    assert s.shown == "charged/dense"
-    phase = views.phase(s.results, views.phase_axes("charged")[0], dense=True)
-    assert [type(el).__name__ for el in phase] == ["RGB", "RGB", "Scatter", "Scatter"]
-    axis = views.phase_axes("charged")[2]
-    labels = {(el.kdims[0].label, el.kdims[1].label if isinstance(el, hv.RGB) else el.vdims[0].label)
-              for el in views.phase(s.results, axis, dense=True)}
-    assert labels == {axis[2:4]} == {("y", "p_y")}
+    assert s.results.dense and len(s.results.entries[0].comparison.run.t) > DENSE
+    figs = shown_figures(view)
+    assert all(isinstance(drawn_, Raster) for _, drawn_ in figs.portraits)
+    labels = [(f.xaxis.axis_label, f.yaxis.axis_label) for f, _ in figs.portraits]
+    assert labels == [("x", "y"), ("x", "p_x"), ("y", "p_y")]
+    image = figs.portraits[0][1].sources["A"].data["image"][0]
+    assert image.dtype == np.uint32 and (image >> 24).max() > 0
+
+
+def test_the_structure_and_cloud_views_plot_the_rigorous_checks():
+    s = Study()
+    view = drawn(structure.StructureView(s))
+    det = view.plots["det"].sources
+    c = s.results.entries[0].comparison
+    assert np.allclose(np.sort(det["A"].data["y"]), np.sort(np.maximum(c.det_dev, 1e-17)))
+    clouds = drawn(cloud.CloudView(s))
+    first = clouds.snapshots["A"].first.data
+    assert len(first["x"]) == c.cloud.q.shape[1] + 1, "the initial loop, closed"
 
 
 def test_theta_lesson_shows_lifted_symplectic_for_every_theta_and_naive_only_at_half():
     s = Study(view="theta", theta=0.3)
-    lesson = ThetaLesson(study=s)
+    lesson = theta.ThetaLesson(s)
     lifted, naive = (e.comparison for e in lesson.results.entries)
     assert np.max(lifted.det_dev) < 1e-12 and np.max(naive.det_dev) > 1e-6
     assert abs(lifted.cloud_area[-1] - 1) < 1e-9 and abs(naive.cloud_area[-1] - 1) > 1e-6
@@ -182,11 +229,13 @@ def test_theta_lesson_shows_lifted_symplectic_for_every_theta_and_naive_only_at_
     assert np.all(np.delete(sweep["theta-naive"]["det"], half) > 1e-8)
     s.theta = 0.7
     assert lesson.results.entries[0].comparison.setup.theta == 0.7
+    view = drawn(theta.ThetaView(s, lesson))
+    assert [m.location for m in view.marks] == [0.7, 0.7]
 
 
 def test_theta_lesson_waits_until_it_is_shown():
     s = Study()
-    lesson = ThetaLesson(study=s)
+    lesson = theta.ThetaLesson(s)
     assert lesson.results is None
     s.view = "theta"
     assert lesson.results is not None
@@ -194,19 +243,21 @@ def test_theta_lesson_waits_until_it_is_shown():
 
 def test_gauge_study_gives_every_gauge_and_invariant_transported_observables():
     s = Study(scene="charged", method="symplectic-euler", view="gauges")
-    g = GaugeStudy(study=s)
+    g = gauges.GaugeStudy(s)
     assert set(g.results) == {"original", "coulomb", "symmetric", "landau", "lorenz"}
     _, q0, p0, Pi0 = g.results["original"]["transported"]
     for runs in g.results.values():
         _, q, _, Pi = runs["transported"]
         assert np.max(np.abs(q - q0)) < 1e-12 and np.max(np.abs(Pi - Pi0)) < 1e-9
     assert np.max(np.abs(g.results["coulomb"]["per-gauge"][2] - p0)) > 1e-3
-    assert len(views.gauge_plot(g.results, "per-gauge", "diff")) == 4
+    assert len(gauges.gauge_series(g.results, "per-gauge", "diff")) == 4
+    diff = gauges.gauge_series(g.results, "transported", "diff")["coulomb"][1]
+    assert len(diff) <= POINTS and diff.max() < 1e-9, "round-off, drawn as its per-bin bound"
 
 
 def test_long_run_in_chunks_matches_the_one_shot_run_and_can_be_cancelled():
     s = Study(values={"gamma": 0.0002})
-    lr = LongRun(study=s, T_long=2000.0)
+    lr = longrun.LongRun(s, T_long=2000.0)
     lr.start()
     assert lr.status.startswith("done") and lr.progress == 1.0 and not lr.running
     data = lr.data
@@ -217,7 +268,7 @@ def test_long_run_in_chunks_matches_the_one_shot_run_and_can_be_cancelled():
         H = e.comparison.run.H_ext[1:, 0]
         assert d["H_max"].max() == pytest.approx(H.max(), rel=1e-6, abs=1e-12)
         assert d["det"].max() == pytest.approx(e.comparison.det_dev.max(), rel=1e-6, abs=1e-15)
-    lr2 = LongRun(study=s, T_long=2e5)
+    lr2 = longrun.LongRun(s, T_long=2e5)
     lr2.param.watch(lambda e: lr2.cancel(), "progress")
     lr2.start()
     assert lr2.status.startswith("cancelled") and 0 < lr2.progress < 1
@@ -225,7 +276,7 @@ def test_long_run_in_chunks_matches_the_one_shot_run_and_can_be_cancelled():
 
 def test_long_run_of_a_diverging_setup_stops_with_data_up_to_there():
     s = Study()
-    lr = LongRun(study=s, T_long=1e4)
+    lr = longrun.LongRun(s, T_long=1e4)
     lr.start()
     assert lr.status.startswith("stopped early")
     for d in lr.data.values():
@@ -237,17 +288,17 @@ def test_long_run_of_a_diverging_setup_stops_with_data_up_to_there():
 
 def test_long_run_refuses_a_horizon_over_the_cap():
     s = Study()
-    lr = LongRun(study=s, T_long=1e8)
+    lr = longrun.LongRun(s, T_long=1e8)
     lr.start()
     assert not lr.running and lr.data == {} and "cap" in s.message.text
 
 
 def test_presets_open_their_figures():
     for preset in PRESETS:
-        query = dict(parse_qsl(urlsplit(preset.query(URL_NAMES, LONG_URL_NAMES)).query))
-        state = {k: query[u] if k in ("scene", "method", "other", "view") else json.loads(query[u])
-                 for k, u in URL_NAMES.items() if u in query}
-        s = Study(**state)
+        query = dict(parse_qsl(urlsplit(preset.query()).query))
+        values, bad = parse_items(query, URL_NAMES)
+        assert bad == [] and values == preset.state
+        s = Study(**values)
         assert s.values == preset.state["values"]
         failed = {e.method for e in s.results.entries if e.failure}
         assert failed == set(preset.fails), preset.name
@@ -259,13 +310,22 @@ def test_presets_open_their_figures():
     assert Study(**kapitza.state).results.entries[0].comparison.run.q[:, 0, 0].min() > 2.5
 
 
+def test_the_url_holds_one_format_and_rounded_numbers():
+    s = Study(scene="modulated", values={"alpha": 2.4310344827586206})
+    state = s.state()
+    assert state["values"] == {"alpha": 2.431034483} and state["h"] == 0.1
+    query = query_items(state, URL_NAMES)
+    assert query["p"] == '{"alpha":2.431034483}' and query["h"] == "0.1" and query["scene"] == "modulated"
+    assert json.loads(query["p"]) == state["values"]
+
+
 def test_a_bad_link_value_is_refused_with_a_message():
     s = Study(scene="charged", values={"gauge": "nope"})
     assert s.values == {} and s.message.level == "error" and "gauge" in s.message.text
 
 
 def test_no_numba_function_is_defined_in_the_app():
-    for path in APP.glob("*.py"):
+    for path in APP.rglob("*.py"):
         jit = re.search(r"^\s*(import numba|from numba|@(numba\.)?n?jit)", path.read_text(), re.MULTILINE)
         assert jit is None, path.name
 
@@ -285,22 +345,22 @@ def test_a_comparison_leases_an_upper_bound_of_its_peak_memory(scene, h, T):
     big = Study(scene=scene, h=h, T=T)
     peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
-    leased = state.comparison_bytes(big.setups(), h, T)
+    leased = study.comparison_bytes(big.setups(), h, T)
     assert peak <= leased <= 2 * peak
-    assert big._lease.nbytes == leased and s._lease.nbytes < leased
+    assert big._held.nbytes == leased and s._held.nbytes < leased
 
 
 def test_a_request_over_the_memory_cap_is_refused_and_the_last_results_stay(monkeypatch):
-    budget = state.MemoryBudget(cap_bytes=100 << 20)
-    monkeypatch.setattr(state, "BUDGET", budget)
+    budget = memory.MemoryBudget(cap_bytes=100 << 20)
+    monkeypatch.setattr(memory, "BUDGET", budget)
     s = Study()
     before = s.results
     held = budget.used
-    assert held == s._lease.nbytes > 0
+    assert held == s._held.nbytes > 0
     s.param.update(h=0.01, T=2000.0)  # 2e5 steps: about 230 MB
     assert s.results is before and s.message.level == "error"
     assert "more than this server's cap of 100 MB (COSYMP_MEMORY_CAP_MB)" in s.message.text
-    assert budget.used == held
+    assert budget.used == held and (s.h, s.T) == (0.1, 50.0)
     other = Study(T=3000.0)  # 35 MB
     assert other.message is None and other.results.T == 3000.0
     s.release()
@@ -309,8 +369,8 @@ def test_a_request_over_the_memory_cap_is_refused_and_the_last_results_stay(monk
 
 
 def test_a_busy_server_refuses_with_a_message_until_memory_is_free(monkeypatch):
-    budget = state.MemoryBudget(cap_bytes=100 << 20)
-    monkeypatch.setattr(state, "BUDGET", budget)
+    budget = memory.MemoryBudget(cap_bytes=100 << 20)
+    monkeypatch.setattr(memory, "BUDGET", budget)
     first = Study(T=6000.0)  # 69 MB
     second = Study()
     second.T = 6000.0
@@ -322,11 +382,11 @@ def test_a_busy_server_refuses_with_a_message_until_memory_is_free(monkeypatch):
 
 
 def test_long_runs_and_measurements_give_their_memory_back(monkeypatch):
-    budget = state.MemoryBudget(cap_bytes=1 << 30)
-    monkeypatch.setattr(state, "BUDGET", budget)
+    budget = memory.MemoryBudget(cap_bytes=1 << 30)
+    monkeypatch.setattr(memory, "BUDGET", budget)
     s = Study()
     held = budget.used
-    lr = LongRun(study=s, T_long=2000.0)
+    lr = longrun.LongRun(s, T_long=2000.0)
     lr.start()
     assert lr.status.startswith("done") and budget.used == held
     s.release()
@@ -337,14 +397,15 @@ def test_a_closed_page_draws_nothing_more_and_holds_no_memory(monkeypatch):
     """After release() (the session was destroyed) a change computes nothing and a result still
     in flight is dropped with its lease: drawn for a destroyed document, it would keep the whole
     session alive in Panel's registry of views."""
-    budget = state.MemoryBudget(cap_bytes=1 << 30)
-    monkeypatch.setattr(state, "BUDGET", budget)
+    budget = memory.MemoryBudget(cap_bytes=1 << 30)
+    monkeypatch.setattr(memory, "BUDGET", budget)
     s = Study()
     shown = s.results
-    job, lease = s._lease_job()
+    run = s._begin()
     s.release()
-    assert budget.used == lease.nbytes > 0
-    s._keep(lease, s._compute(job))
+    assert budget.used == run.lease.nbytes > 0
+    run._main()
+    s._end(run)
     s.values = {"gamma": 0.3}
     assert s.results is shown and budget.used == 0
 
@@ -355,16 +416,15 @@ def test_a_cancelled_long_run_frees_its_chunks_and_its_lease(monkeypatch):
     loads compiled code for good): the lease is given back, and what stays on the heap is the
     shown envelopes (at most LONG_BINS bins per method), not the chunks' records (tracemalloc:
     the peak is the chunks, the rest is freed)."""
-    import gc
     import tracemalloc
 
-    budget = state.MemoryBudget(cap_bytes=1 << 30)
-    monkeypatch.setattr(state, "BUDGET", budget)
+    budget = memory.MemoryBudget(cap_bytes=1 << 30)
+    monkeypatch.setattr(memory, "BUDGET", budget)
     s = Study(values={"gamma": 2e-4})
     held = budget.used
     tracemalloc.start()
     for _ in range(2):
-        lr = LongRun(study=s, T_long=5e5)
+        lr = longrun.LongRun(s, T_long=5e5)
         seen = []
 
         def cancel(event, lr=lr, seen=seen):
@@ -379,7 +439,7 @@ def test_a_cancelled_long_run_frees_its_chunks_and_its_lease(monkeypatch):
         peak = tracemalloc.get_traced_memory()[1]
         gc.collect()  # the last chunk's records sit in a reference cycle until the collector runs
         current = tracemalloc.get_traced_memory()[0]
-        assert lr.status.startswith("cancelled") and seen == [state.LONG_RUN_BYTES] and budget.used == held
+        assert lr.status.startswith("cancelled") and seen == [longrun.LONG_RUN_BYTES] and budget.used == held
     tracemalloc.stop()
     kept = current - before
     envelopes = sum(v.nbytes for d in lr.data.values() for v in d.values() if isinstance(v, np.ndarray))
@@ -393,21 +453,21 @@ def test_a_long_run_redraws_at_most_once_per_interval_and_ends_with_everything(m
     are published at most once per LONG_DRAW_SECONDS, and the last publication holds every bin."""
     import time
 
-    monkeypatch.setattr(state, "LONG_CHUNK_SECONDS", 0.01)
-    monkeypatch.setattr(state, "LONG_DRAW_SECONDS", 0.1)
+    monkeypatch.setattr(longrun, "LONG_CHUNK_SECONDS", 0.01)
+    monkeypatch.setattr(longrun, "LONG_DRAW_SECONDS", 0.1)
     s = Study(values={"gamma": 2e-4})
-    lr = LongRun(study=s, T_long=1e5)
-    progress, drawn = [], []
+    lr = longrun.LongRun(s, T_long=1e5)
+    progress, drawn_ = [], []
     lr.param.watch(lambda e: progress.append(time.perf_counter()), "progress")
-    lr.param.watch(lambda e: drawn.append(time.perf_counter()), "data")
+    lr.param.watch(lambda e: drawn_.append(time.perf_counter()), "data")
     lr.start()
     assert lr.status.startswith("done")
     # The gaps are timed after each publication, the interval before it: allow for jitter in
     # building the envelopes. The last publication (the final envelopes) comes whenever the run ends.
-    between = np.diff(drawn[:-1])
-    assert len(progress) > 3 * len(drawn) and len(between) >= 3 and between.min() >= 0.07, (len(progress), between)
+    between = np.diff(drawn_[:-1])
+    assert len(progress) > 3 * len(drawn_) and len(between) >= 3 and between.min() >= 0.07, (len(progress), between)
     steps = round(1e5 / s.h)
-    width = -(-steps // state.LONG_BINS)
+    width = -(-steps // longrun.LONG_BINS)
     for d in lr.data.values():  # every bin (t: the time after each bin's first step)
         assert len(d["t"]) == -(-steps // width)
         assert d["t"][-1] == pytest.approx(((len(d["t"]) - 1) * width + 1) * s.h)
@@ -421,39 +481,39 @@ def test_a_freed_app_gives_memory_back_then_is_logged_after_its_collection(monke
     import types
 
     events = []
-    monkeypatch.setattr(state, "give_back", lambda: events.append("give_back"))
-    monkeypatch.setattr(state, "LOG", types.SimpleNamespace(info=events.append))
+    monkeypatch.setattr(memory, "give_back", lambda: events.append("give_back"))
+    monkeypatch.setattr(memory, "LOG", types.SimpleNamespace(info=events.append))
 
     class Page:
         pass
 
     page = Page()
-    state.log_when_freed(page)
+    memory.log_when_freed(page)
     del page
     gc.collect()
-    assert events == ["give_back", state.FREED]
+    assert events == ["give_back", memory.FREED]
 
     async def on_a_loop():
         page = Page()
-        state.log_when_freed(page)
+        memory.log_when_freed(page)
         del page
         gc.collect()
         in_the_collection = list(events)
         await asyncio.sleep(0)
         return in_the_collection
 
-    assert asyncio.run(on_a_loop()) == ["give_back", state.FREED]
-    assert events == ["give_back", state.FREED] * 2
+    assert asyncio.run(on_a_loop()) == ["give_back", memory.FREED]
+    assert events == ["give_back", memory.FREED] * 2
 
 
 def test_a_long_run_whose_page_closed_stops_and_publishes_nothing_more(monkeypatch):
     """release() (the session was destroyed): the run stops after its chunk, gives its lease back,
     and publishes neither the envelopes computed since the last redraw nor a status."""
-    budget = state.MemoryBudget(cap_bytes=1 << 30)
-    monkeypatch.setattr(state, "BUDGET", budget)
+    budget = memory.MemoryBudget(cap_bytes=1 << 30)
+    monkeypatch.setattr(memory, "BUDGET", budget)
     s = Study(values={"gamma": 2e-4})
     held = budget.used
-    lr = LongRun(study=s, T_long=2e5)
+    lr = longrun.LongRun(s, T_long=2e5)
     published, at_release = [], []
 
     def close_the_page(event):

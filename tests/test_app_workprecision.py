@@ -1,19 +1,16 @@
-"""The app's work-precision and long-horizon state objects and their plots, without a server."""
+"""The app's work-precision and long-horizon measurements (app.features.workprecision) and their
+plots, without a server."""
 import math
 import time
 
-import holoviews as hv
 import numpy as np
 import pytest
 
-from app import views
-from app.state import LongHorizons, Study, WorkPrecision
+from app import memory
+from app.features import workprecision as views
+from app.features.workprecision import MEASURE_BYTES, LongHorizons, WorkPrecision
+from app.study import Study
 from cosymp import workprecision as wp
-
-
-@pytest.fixture(scope="module", autouse=True)
-def plotting_backend():
-    hv.extension("bokeh")
 
 
 @pytest.fixture(scope="module")
@@ -21,7 +18,7 @@ def measured():
     """A small measurement on the decaying scene (rk4 and the lifted θ-method at θ = 0.3, scipy's
     solvers), with the progress it published."""
     s = Study(scene="decaying", theta=0.3)
-    m = WorkPrecision(study=s, methods=["rk4", "theta"])
+    m = WorkPrecision(s, methods=["rk4", "theta"])
     seen = []
     m.param.watch(lambda e: seen.append((e.new, m.label)), "progress")
     m.start()
@@ -48,17 +45,19 @@ def test_a_measurement_gives_rows_for_every_solver_and_its_progress_reaches_one(
 
 def test_the_plots_draw_every_finite_point_and_the_targets_table_names_the_ratios(measured):
     _, m, _ = measured
-    overlay = views.wp_plot(m.rows, "error")
-    curves = [el for el in overlay if isinstance(el, hv.Curve)]
-    styles = {el.label: el.opts.get().kwargs["line_dash"] for el in curves}
-    assert styles["rk4"] == "solid" and styles["scipy-DOP853"] == "dashed"
-    scatter = overlay.get(len(overlay) - 1)
-    assert len(scatter) == len(views.wp_points(m.rows, "error")) == sum(len(c) for c in curves)
-    assert set(scatter.dimension_values("marker")) == {"circle", "square"}
-    table = views.targets_html(m.rows)
-    assert "scipy DOP853 / fastest cosymp" in table and "best symplectic / rk4" in table
+    plot = views.WorkPrecisionPlot("error", "", lambda row: None)
+    plot.set(m.rows)
+    lines = {label: (src, r) for label, (src, r) in plot.curves.lines.items() if len(src.data["x"])}
+    styles = {label: r.glyph.line_dash for label, (_, r) in lines.items()}
+    assert styles["rk4"] == [] and styles["scipy-DOP853"] == [6]  # solid, and Bokeh's "dashed"
+    points = plot.points.data
+    assert len(points["x"]) == len(views.wp_points(m.rows, "error")) == sum(len(src.data["x"]) for src, _ in lines.values())
+    assert set(points["marker"]) == {"circle", "square"}
+    assert [item.label.value for item in plot.curves.legend.items] == list(lines)
+    table = views.targets_table(m.rows)
+    assert "scipy DOP853 / fastest cosymp" in table["time to reach"] and "best symplectic / rk4" in table["time to reach"]
     cost = wp.targets(m.rows)["cost"][1e-6]["rk4"]
-    assert f"{cost:.2e} s" in table
+    assert f"{cost:.2e} s" in table["error 1e-06"]
     assert views.reference_html(m.rows) == "<p class='doc'>Reference: exact flow.</p>"
 
 
@@ -74,13 +73,11 @@ def test_failed_runs_are_not_plotted_but_listed():
 def test_tapping_a_cosymp_point_opens_it_in_the_orbits_view(measured):
     s, m, _ = measured
     s.param.update(scene="damped", view="workprecision")
-    pane = views.rows_plot(m.rows, views.wp_plot, "error", "", "", "",
-                           lambda i: m.open_row(views.wp_points(m.rows, "error")[i]))
-    scatter = pane.object.get(len(pane.object) - 1)
-    (stream,) = hv.streams.Stream.registry[scatter]
+    plot = views.WorkPrecisionPlot("error", "", m.open_row)
+    plot.set(m.rows)
     points = views.wp_points(m.rows, "error")
     k = next(i for i, r in enumerate(points) if r["solver"] == "theta(0.3)" and r["steps"] > 20)
-    stream.event(index=[k])
+    plot.points.selected.indices = [k]
     row = points[k]
     assert (s.scene, s.method, s.theta, s.view) == ("decaying", "theta", 0.3, "compare")
     assert (s.h, s.T) == (row["h"], 10.0)
@@ -98,7 +95,7 @@ def test_tapping_a_peer_point_says_it_cannot_be_opened(measured):
 
 def test_cancel_stops_a_measurement_within_a_second():
     s = Study()
-    m = WorkPrecision(study=s)
+    m = WorkPrecision(s)
     asked = []
 
     def cancel(event):
@@ -109,7 +106,7 @@ def test_cancel_stops_a_measurement_within_a_second():
     m.param.watch(cancel, "progress")
     m.start()
     assert m.status.startswith("cancelled") and not m.running and m.rows == []
-    assert m._worker.finished.wait(5)
+    assert m.join(5)
     assert time.perf_counter() - asked[0] < 1.5
 
 
@@ -120,17 +117,15 @@ def test_a_cancelled_measurement_frees_its_thread_its_lease_and_its_memory(monke
     import threading
     import tracemalloc
 
-    from app import state
-
-    budget = state.MemoryBudget(cap_bytes=1 << 30)
-    monkeypatch.setattr(state, "BUDGET", budget)
+    budget = memory.MemoryBudget(cap_bytes=1 << 30)
+    monkeypatch.setattr(memory, "BUDGET", budget)
     s = Study(scene="charged")
     held = budget.used
     threads = threading.active_count()
     tracemalloc.start()
     figures = []
     for _ in range(2):
-        m = WorkPrecision(study=s)
+        m = WorkPrecision(s)
         before = tracemalloc.get_traced_memory()[0]
         during = []
 
@@ -141,11 +136,11 @@ def test_a_cancelled_measurement_frees_its_thread_its_lease_and_its_memory(monke
 
         m.param.watch(cancel, "progress")
         m.start()
-        assert m._worker.finished.wait(10)
-        m._worker.thread.join(5)
+        assert m.join(10)
+        m.run.thread.join(5)
         figures.append((during[0], tracemalloc.get_traced_memory()[0] - before))
-        assert m.status.startswith("cancelled") and not m._worker.thread.is_alive()
-        assert during[0][1] == state.MEASURE_BYTES and budget.used == held
+        assert m.status.startswith("cancelled") and not m.run.thread.is_alive()
+        assert during[0][1] == MEASURE_BYTES and budget.used == held
         assert threading.active_count() == threads
     tracemalloc.stop()
     (used, _), after = figures[1]
@@ -156,11 +151,11 @@ def test_a_cancelled_measurement_frees_its_thread_its_lease_and_its_memory(monke
 
 @pytest.mark.parametrize("change, needle", [
     ({"methods": []}, "choose at least one method"),
-    ({"T": 1e6}, "shorten T"),
+    ({"T": 1.5e5}, "shorten T"),  # within the live views' limit, beyond this view's
 ])
 def test_bad_input_is_a_message_and_nothing_starts(change, needle):
     s = Study(scene="decaying")
-    m = WorkPrecision(study=s)
+    m = WorkPrecision(s)
     if "T" in change:
         s.T = change["T"]
     else:
@@ -172,7 +167,7 @@ def test_bad_input_is_a_message_and_nothing_starts(change, needle):
 
 def test_an_unexpected_failure_is_a_message_and_the_session_goes_on(monkeypatch):
     s = Study(scene="decaying")
-    m = WorkPrecision(study=s, methods=["rk4"], peers=False)
+    m = WorkPrecision(s, methods=["rk4"], peers=False)
 
     def broken(*args, **kwargs):
         return 1 / 0
@@ -188,7 +183,7 @@ def test_an_unexpected_failure_is_a_message_and_the_session_goes_on(monkeypatch)
 
 def test_the_methods_and_defaults_follow_the_scene():
     s = Study()
-    m, lh = WorkPrecision(study=s), LongHorizons(study=s)
+    m, lh = WorkPrecision(s), LongHorizons(s)
     assert "boris" not in m.param.methods.objects and "exact" not in m.param.methods.objects
     assert (lh.h, lh.T_max) == (0.1, 1e5)
     s.scene = "charged"
@@ -198,24 +193,27 @@ def test_the_methods_and_defaults_follow_the_scene():
 
 def test_long_horizons_show_linear_error_growth_and_the_fitted_exponents():
     s = Study(values={"gamma": 0.0002})
-    lh = LongHorizons(study=s, methods=["rk4", "gauss4"], T_max=1e4)
+    lh = LongHorizons(s, methods=["rk4", "gauss4"], T_max=1e4)
     lh.start()
     assert lh.status.startswith("done") and lh.progress == 1.0
     assert sorted({r["T"] for r in lh.rows}) == [T for T in wp.DRIFT_HORIZONS if T <= 1e4]
     for solver in ("rk4", "gauss4"):
         assert 0.8 < wp.growth_exponent(lh.rows, solver) < 1.2
-    table = views.growth_html(lh.rows)
-    assert f"{wp.growth_exponent(lh.rows, 'rk4'):.2f}" in table
-    overlay = views.drift_plot(lh.rows, "error")
-    assert f"rk4: slope {wp.growth_exponent(lh.rows, 'rk4'):.2f}" in [el.label for el in overlay]
-    slopes = {el.label: el for el in overlay if el.label.startswith("∝")}
-    T1, y1 = (slopes["∝ T (linear)"].dimension_values(i) for i in (0, 1))
+    table = views.growth_table(lh.rows)
+    assert f"{wp.growth_exponent(lh.rows, 'rk4'):.2f}" in table["error ∝ T^"]
+    plot = views.DriftPlot("error", "")
+    plot.set(lh.rows)
+    labels = [item.label.value for item in plot.curves.legend.items]
+    assert f"rk4: slope {wp.growth_exponent(lh.rows, 'rk4'):.2f}" in labels
+    T1, y1 = (plot.guides[1].data[k] for k in ("x", "y"))
     assert y1[1] / y1[0] == pytest.approx(T1[1] / T1[0])
+    T2, y2 = (plot.guides[2].data[k] for k in ("x", "y"))
+    assert y2[1] / y2[0] == pytest.approx((T2[1] / T2[0]) ** 2)
 
 
 def test_long_horizons_past_the_reference_show_the_horizons_before_it():
     s = Study()
-    lh = LongHorizons(study=s, T_max=1e4)
+    lh = LongHorizons(s, T_max=1e4)
     lh.start()
     top = max(r["T"] for r in lh.rows)
     assert lh.status.startswith("done") and 100 <= top < 1e4
@@ -226,14 +224,14 @@ def test_long_horizons_past_the_reference_show_the_horizons_before_it():
 @pytest.mark.parametrize("h, needle", [(0.0, "h > 0"), (1e-4, "beyond this view's limit")])
 def test_long_horizons_refuse_a_bad_step(h, needle):
     s = Study()
-    lh = LongHorizons(study=s, h=h, T_max=1e4)
+    lh = LongHorizons(s, h=h, T_max=1e4)
     lh.start()
     assert not lh.running and lh.rows == [] and needle in s.message.text
 
 
 def test_long_horizons_can_be_cancelled():
     s = Study(scene="modulated")
-    lh = LongHorizons(study=s, T_max=1e5)
+    lh = LongHorizons(s, T_max=1e5)
     asked = []
 
     def cancel(event):
@@ -245,4 +243,4 @@ def test_long_horizons_can_be_cancelled():
     lh.start()
     assert lh.status.startswith("cancelled") and lh.rows == [] and not lh.running
     assert time.perf_counter() - asked[0] < 0.5
-    assert lh._worker.finished.wait(30)
+    assert lh.join(30)

@@ -515,11 +515,8 @@ def test_cli_exits_0_2_or_3_with_one_line_on_error(cli_folder, data):
 
 @pytest.fixture(scope="module")
 def session():
-    """The app's Study class, with the bokeh plotting backend as test_app_state.py sets it up, and every
-    scene's comparison compiled before the deadlines apply."""
-    hv = pytest.importorskip("holoviews")
-    hv.extension("bokeh")
-    from app.state import Study
+    """The app's Study class, and every scene's comparison loaded before the deadlines apply."""
+    from app.study import Study
 
     for scene in SCENES:
         Study(scene=scene, **_good(scene))

@@ -137,7 +137,7 @@ def test_bad_report_input_is_one_line():
 
 
 def test_app_report_uses_the_views_runs():
-    from app.state import Study, study_report
+    from app.study import Study, study_report
 
     study = Study(scene="decaying", method="symplectic-euler")
     text = study_report(study)

@@ -13,9 +13,10 @@ import math
 import time
 from dataclasses import dataclass, field
 from importlib import resources
-from itertools import pairwise
 
 import numpy as np
+
+from .. import series
 
 MAX_POINTS = 4000
 
@@ -80,44 +81,20 @@ PALETTE = ("#d62728", "#1f77b4", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e
 
 
 def envelope(x, y, max_points=MAX_POINTS):
-    """(x, y) reduced to at most max_points: per bin the minimum and the maximum of y, in the
-    order they occur, so extremes and oscillation bands stay visible. Short series pass as they are."""
-    x = np.asarray(x, float)
-    y = np.asarray(y, float)
-    if len(x) <= max_points:
-        return x, y
-    bins = max_points // 2
-    edges = np.linspace(0, len(x), bins + 1).astype(int)
-    keep = []
-    for a, b in pairwise(edges):
-        seg = y[a:b]
-        if not np.any(np.isfinite(seg)):
-            keep.append(a)
-            continue
-        lo, hi = a + int(np.nanargmin(seg)), a + int(np.nanargmax(seg))
-        keep.extend(sorted({lo, hi}))
-    keep = np.array(keep)
-    return x[keep], y[keep]
+    """series.envelope at the reports' resolution."""
+    return series.envelope(x, y, max_points)
 
 
 def thin(x, y, max_points=MAX_POINTS):
-    """A parametric curve (x, y) reduced to at most max_points evenly spaced points, in order."""
-    x = np.asarray(x, float)
-    y = np.asarray(y, float)
-    if len(x) <= max_points:
-        return x, y
-    keep = np.unique(np.linspace(0, len(x) - 1, max_points).round().astype(int))
-    return x[keep], y[keep]
-
-
-def _number(v):
-    if v is None or not math.isfinite(v):
-        return "null"
-    return f"{v:.7g}"
+    """series.thin at the reports' resolution."""
+    return series.thin(x, y, max_points)
 
 
 def _array(values):
-    return "[" + ",".join(_number(float(v)) for v in values) + "]"
+    v = np.asarray(values, float)
+    text = np.char.mod("%.7g", v).astype(object)
+    text[~np.isfinite(v)] = "null"
+    return "[" + ",".join(text.tolist()) + "]"
 
 
 def _figure_json(fig, key):

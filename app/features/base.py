@@ -1,0 +1,98 @@
+"""What a feature is, and the view every tab's view is built on."""
+from dataclasses import dataclass, field
+
+import panel as pn
+import param
+
+from ..jobs import Job
+from ..plotting import push
+
+
+@dataclass(frozen=True)
+class Feature:
+    name: str
+    label: str
+    view: object
+    state: object = None
+    url: dict = field(default_factory=dict)
+
+
+class FeatureView(pn.viewable.Viewer):
+    """A tab's view: its layout (figures included) is built once, when first shown; new data then
+    only replaces the figures' data. Data that arrives while another tab is shown is drawn when
+    this one is shown again."""
+
+    NAME = ""
+
+    def __init__(self, study, state=None, **params):
+        super().__init__(**params)
+        self.study = study
+        self.state = state
+        self._layout = None
+        self._stale = True
+
+    @property
+    def visible(self):
+        return self.study.view == self.NAME
+
+    def __panel__(self):
+        if self._layout is None:
+            self._layout = self.layout()
+            self._stale = True
+        if self._stale:
+            self.redraw()
+        return self._layout
+
+    def shown(self):
+        """Its tab has become the shown one."""
+        if self._layout is not None and self._stale:
+            self.redraw()
+
+    def follow(self, obj, *names):
+        """Redraw when these parameters of obj change (now if shown, else when next shown)."""
+        obj.param.watch(lambda *events: self.changed(), list(names))
+
+    def changed(self):
+        self._stale = True
+        if self._layout is not None and self.visible:
+            self.redraw()
+
+    def redraw(self):
+        self._stale = False
+        push(self.update)
+
+    def layout(self):
+        raise NotImplementedError
+
+    def update(self):
+        raise NotImplementedError
+
+
+class Follower(Job):
+    """A computation derived from the sidebar's study, for one tab: recomputed when the study's
+    WATCHED inputs change while its tab (NAME) is shown and it applies; its messages go to the
+    study's."""
+
+    study = param.Parameter(doc="The sidebar's study.")
+    NAME = ""
+    WATCHED = ()
+
+    def __init__(self, study, **params):
+        super().__init__(study=study, **params)
+        study.param.watch(self._on_study, [*self.WATCHED, "view"])
+        if self.active:
+            self.refresh()
+
+    @property
+    def active(self):
+        return self.study.view == self.NAME and self.applies()
+
+    def applies(self):
+        return True
+
+    def say(self, note):
+        self.study.say(note)
+
+    def _on_study(self, *events):
+        if self.active:
+            self.request()

@@ -1,0 +1,75 @@
+"""Cloud: a loop of initial states carried by each method, and its area over time. It shows the
+sidebar's comparison."""
+import numpy as np
+import panel as pn
+
+from cosymp.report.style import pair_colors
+
+from ..plotting import SLOTS, figure, grid, note, pane, path, source
+from .base import Feature, FeatureView
+from .common import color_key, comparisons, names
+from .structure import time_plots, update_plots
+
+CLOUD_TEXT = ("<h4>Phase-space cloud</h4><p class='doc'>A loop of initial states (radius 0.05 around the "
+              "initial condition, first coordinate pair) carried by each method (A left, B right), drawn at "
+              "t = 0 (light) and at T/4, T/2, 3T/4 and T (dark) over the trajectory (grey).</p>")
+
+
+def closed(q, p):
+    return np.append(q, q[0]), np.append(p, p[0])
+
+
+class Snapshots:
+    """One method's carried loop: the trajectory (grey), the loop at t = 0 (light) and at T/4, T/2,
+    3T/4 and T (dark; one curve broken between loops)."""
+
+    def __init__(self, title):
+        self.fig = figure(title, "q1", "p1")
+        self.trajectory, self.first, self.later = source(), source(), source()
+        self.fig.line("x", "y", source=self.trajectory, line_color="#ced4da", line_width=1)
+        self.lines = [self.fig.line("x", "y", source=self.first, line_width=2, line_alpha=0.35),
+                      self.fig.line("x", "y", source=self.later, line_width=2)]
+
+    def set(self, c, color):
+        for line in self.lines:
+            line.glyph.line_color = color
+        if c is None or c.cloud is None:
+            for s in (self.trajectory, self.first, self.later):
+                s.data = {"x": np.empty(0), "y": np.empty(0)}
+            return
+        self.trajectory.data = dict(zip("xy", path(c.run.q[:, 0, 0], c.run.p[:, 0, 0])))
+        self.first.data = dict(zip("xy", closed(c.cloud.q[0, :, 0], c.cloud.p[0, :, 0])))
+        K = len(c.cloud.t)
+        later = [closed(c.cloud.q[k, :, 0], c.cloud.p[k, :, 0]) for k in np.linspace(0, K - 1, 5).astype(int)[1:]]
+        gap = np.array([np.nan])
+        self.later.data = {"x": np.concatenate([np.concatenate([x, gap]) for x, _ in later]),
+                           "y": np.concatenate([np.concatenate([y, gap]) for _, y in later])}
+
+
+def loops(runs, snapshots):
+    cs = comparisons(runs)
+    for (slot, snap), color in zip(snapshots.items(), pair_colors(*names(runs))):
+        snap.set(cs.get(slot), color)
+
+
+class CloudView(FeatureView):
+    NAME = "cloud"
+
+    def layout(self):
+        self.snapshots = {slot: Snapshots(f"{slot}: loop at t = 0 (light), T/4, T/2, 3T/4, T (dark)") for slot in SLOTS}
+        self.plots = time_plots(["area"])
+        self.key = note("")
+        self.follow(self.study, "results")
+        return pn.Column(self.key, note(CLOUD_TEXT), grid(*[pane(s.fig) for s in self.snapshots.values()]),
+                         grid(pane(self.plots["area"].fig)), sizing_mode="stretch_width")
+
+    def update(self):
+        runs = self.study.results
+        if runs is None:
+            return
+        loops(runs, self.snapshots)
+        update_plots(self.plots, runs)
+        self.key.object = color_key(runs)
+
+
+FEATURE = Feature("cloud", "Cloud", CloudView)

@@ -1,0 +1,82 @@
+"""What the comparison views share: the two methods' slots, their colour key, the numbers table,
+the phase portraits' axes and series taken from a comparison."""
+import html
+
+import numpy as np
+
+from cosymp.methods import METHODS
+from cosymp.report.style import pair_colors
+from cosymp.scenes import SCENES
+
+from ..plotting import SLOTS, fmt, series, swatch
+
+EMPTY = np.empty(0)
+
+
+def comparisons(runs):
+    """{slot: Comparison} of the runs that could be computed."""
+    entries = runs.entries if runs is not None else ()
+    return {slot: e.comparison for slot, e in zip(SLOTS, entries) if e.comparison is not None}
+
+
+def names(runs):
+    """The two methods' names (their colours)."""
+    return tuple(e.method for e in runs.entries) if runs is not None else ("", "")
+
+
+def color_key(runs):
+    """Which method each curve is (colour, solid A or dashed B), what it preserves, its order."""
+    if runs is None:
+        return ""
+    parts = []
+    for i, (e, color) in enumerate(zip(runs.entries, pair_colors(*names(runs)))):
+        m = METHODS[e.method]
+        theta = e.comparison.setup.theta if e.comparison is not None else None
+        theta = 0.5 if theta is None else theta
+        parts.append(f"<b>{SLOTS[i]}</b> {swatch(color, e.label, dashed=i == 1)} <span class='doc'>"
+                     f"{html.escape(m.title)}; preserves: {html.escape(m.preserves_at(theta))}; order "
+                     f"{m.order_at(theta)}</span>")
+    return "<div class='colorkey'>" + "&emsp;&emsp;".join(parts) + "</div>"
+
+
+NUMBER_ROWS = ("max |H + p_t|", "max |det M - 1|", "max |M^T J M - J|", "final error", "steps", "time (s)")
+
+
+def numbers(runs):
+    """The numbers table (Comparison.summary, maxima over every step) as columns of text."""
+    cols = {"quantity": list(NUMBER_ROWS) + ["run"]}
+    for e in runs.entries if runs is not None else ():
+        summary = e.comparison.summary if e.comparison is not None else {}
+        cols[e.label] = [fmt(summary.get(k)) for k in NUMBER_ROWS] + [e.failure or "reached T"]
+    return cols
+
+
+def phase_axes(scene):
+    """(x index, y index, x label, y label, title) of the scene's phase portraits in z = (q, p)."""
+    s = SCENES[scene]
+    n = s.ndof
+    names_ = list(s.coordinates)
+    if n == 1:
+        return [(0, 1, "q", "p", "phase portrait (q, p), dot: start")]
+    return [(0, 1, names_[0], names_[1], f"orbit ({names_[0]}, {names_[1]}), dot: start")] + [
+        (i, n + i, names_[i], f"p_{names_[i]}", f"({names_[i]}, p_{names_[i]})") for i in range(n)]
+
+
+def zcols(run, i, j):
+    """Columns i and j of z = (q, p) of the trajectory."""
+    n = run.q.shape[-1]
+
+    def col(k):
+        return run.q[:, 0, k] if k < n else run.p[:, 0, k - n]
+
+    return col(i), col(j)
+
+
+def over_time(runs, get, logy=False):
+    """{slot: (t, y)} of get(comparison) -> (t, y) for display (envelopes; |y| on a log axis)."""
+    out = {}
+    for slot, c in comparisons(runs).items():
+        t, y = get(c)
+        if y is not None:
+            out[slot] = series(t, y, logy)
+    return out

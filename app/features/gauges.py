@@ -1,0 +1,164 @@
+"""Gauges (a scene with a gauge parameter: the charged particle): q, p and Π in the five gauges,
+per-gauge runs beside the transported maps, their differences from the original gauge, and
+where the paper's gauges do not satisfy the condition their names promise."""
+import html
+import math
+
+import numpy as np
+import panel as pn
+import param
+
+from cosymp.errors import RunError
+from cosymp.integrate import Setup
+from cosymp.methods import METHODS
+from cosymp.report.style import GAUGE_COLORS
+from cosymp.scenes import SCENES
+from cosymp.scenes.charged import GAUGES
+from cosymp.study import gauge_study
+
+from ..jobs import Note
+from ..plotting import FLOOR, POINTS, figure, grid, note, pane, path, series, source, swatch
+from ..study import comparison_bytes, theta_for
+from .base import Feature, FeatureView, Follower
+
+KINDS = (("per-gauge", "Per-gauge runs: the method applied in each gauge"),
+         ("transported", "Transported: the original-gauge run mapped by G_χ"))
+QUANTITIES = {"orbit": ("orbit (x, y)", "x", "y"), "p": ("canonical p_x (gauge-dependent)", "t", "p_x"),
+              "Pi": ("mechanical Π_x = p_x − e A_x (gauge-invariant)", "t", "Π_x"),
+              "diff": ("|q − q_orig| + |Π − Π_orig|, max per bin", "t", "difference")}
+
+
+def has_gauges(scene):
+    return any(p.name == "gauge" for p in scene.params)
+
+
+class GaugeStudy(Follower):
+    """The charged particle in all five gauges with the study's method, h, T and parameters."""
+
+    NAME = "gauges"
+    KIND = "gauge study"
+    WHAT = "the gauge study"
+    HOLD = True
+    WATCHED = ("scene", "method", "theta", "h", "T", "values")
+    results = param.Dict(default=None, allow_None=True, doc="{gauge: {'per-gauge': (t, q, p, Pi), 'transported': ...}}.")
+    method = param.String(default="", doc="The method of the results.")
+
+    def applies(self):
+        return has_gauges(self.study.scene_obj)
+
+    def _inputs(self):
+        s = self.study
+        s.check_horizon()
+        values = {k: v for k, v in s.values.items() if k != "gauge"}
+        theta = theta_for(s.method, s.theta)
+        setup = Setup.make(s.scene, s.method, values, theta)
+        return s.method, values, float(s.h), float(s.T), theta, setup
+
+    def _bytes(self, inputs):
+        # bounded above: six single-member runs and five transports use less than one comparison
+        return comparison_bytes([inputs[5]], inputs[2], inputs[3])
+
+    def _compute(self, inputs, run):
+        method, values, h, T, theta, _ = inputs
+        try:
+            return METHODS[method].label(theta), gauge_study(method, values, h, T, theta), ""
+        except RunError as err:
+            return METHODS[method].label(theta), None, str(err)
+
+    def _finish(self, inputs, result):
+        label, data, failure = result
+        if failure:
+            self.say(Note("warning", f"gauge study with {label}: {failure}"))
+            return
+        self.method = label
+        self.results = data
+
+    def _done_in(self, inputs, elapsed):
+        """A live view keeps no status line."""
+
+
+def gauge_series(data, kind, quantity):
+    """{gauge: (x, y)} of one quantity of every gauge's run (the difference: not the original's)."""
+    out = {}
+    for g in GAUGES:
+        if quantity == "diff" and g == "original":
+            continue
+        t, q, p, Pi = data[g][kind]
+        if quantity == "orbit":
+            out[g] = path(q[:, 0], q[:, 1])
+        elif quantity == "p":
+            out[g] = series(t, p[:, 0])
+        elif quantity == "Pi":
+            out[g] = series(t, Pi[:, 0])
+        else:
+            _, q0, _, Pi0 = data["original"][kind]
+            d = np.linalg.norm(q - q0, axis=-1) + np.linalg.norm(Pi - Pi0, axis=-1)
+            out[g] = upper_envelope(t, np.maximum(d, FLOOR))
+    return out
+
+
+def upper_envelope(t, y):
+    """The maximum of each of at most POINTS bins (round-off differences drawn as their bound, not
+    as a band of noise)."""
+    if len(y) <= POINTS:
+        return t, y
+    width = math.ceil(len(y) / POINTS)
+    padded = np.full(math.ceil(len(y) / width) * width, -np.inf)
+    padded[:len(y)] = y
+    return t[::width], padded.reshape(-1, width).max(axis=1)
+
+
+class GaugeView(FeatureView):
+    NAME = "gauges"
+
+    def layout(self):
+        g = self.state
+        self.sources = {}
+        columns = []
+        for kind, text in KINDS:
+            figs = []
+            for quantity, (title, xl, yl) in QUANTITIES.items():
+                fig = figure(title, xl, yl, logy=quantity == "diff")
+                for name in GAUGES:
+                    if quantity == "diff" and name == "original":
+                        continue
+                    src = self.sources[kind, quantity, name] = source()
+                    fig.line("x", "y", source=src, line_color=GAUGE_COLORS[name], line_width=1.5,
+                             line_dash="solid" if name == "original" or quantity == "diff" else "dashed")
+                figs.append(pane(fig))
+            columns.append(pn.Column(note(f"<h4>{text}</h4>"), *figs, sizing_mode="stretch_width"))
+        rows = [pn.Row(note(f"<b>{name}</b>", width=90, sizing_mode=None),
+                       pn.pane.LaTeX(f"$\\chi = {x.chi}$", renderer="katex", width=230),
+                       note(f"<span class='doc'>condition: {html.escape(x.condition)}</span>"
+                            + (f"<br><span class='caveat'>{html.escape(x.caveat)}</span>" if x.caveat else "")),
+                       sizing_mode="stretch_width")
+                for name, x in GAUGES.items()]
+        key = "&emsp;".join(swatch(GAUGE_COLORS[name], name, dashed=name != "original") for name in GAUGES)
+        self.method = note("")
+        self.follow(g, "results", "method")
+        self.study.param.watch(lambda e: self.changed(), "scene")
+        button = pn.widgets.Button(name="Open the charged particle", button_type="primary")
+        button.on_click(lambda event: self.study.param.update(
+            scene=next(s.name for s in SCENES.values() if has_gauges(s))))
+        self.away = pn.Column(note("<p>The gauge study is about the charged particle in a time-dependent field.</p>"),
+                              button)
+        self.body = pn.Column(self.method, *rows, note(f"<div class='colorkey'>{key}</div>"),
+                              grid(*columns), sizing_mode="stretch_width")
+        return pn.Column(self.away, self.body, sizing_mode="stretch_width")
+
+    def update(self):
+        g = self.state
+        on = has_gauges(self.study.scene_obj)
+        self.away.visible, self.body.visible = not on, on
+        if not on or g.results is None:
+            return
+        self.method.object = (f"<p>Method: <b>{html.escape(g.method)}</b>. q and the mechanical momentum Π agree "
+                              "across gauges (to the method's order for per-gauge runs, to round-off when "
+                              "transported); the canonical momentum p does not.</p>")
+        for kind, _ in KINDS:
+            for quantity in QUANTITIES:
+                for name, (x, y) in gauge_series(g.results, kind, quantity).items():
+                    self.sources[kind, quantity, name].data = {"x": x, "y": y}
+
+
+FEATURE = Feature("gauges", "Gauges", GaugeView, GaugeStudy)

@@ -1,0 +1,226 @@
+"""Long run: the sidebar's scene, methods, parameters and h run to a long horizon in chunks off the
+event loop, with progress and Cancel, drawn as per-bin envelopes as they arrive."""
+import dataclasses
+import html
+import math
+import time
+from concurrent.futures import ThreadPoolExecutor
+from functools import partial
+
+import numpy as np
+import panel as pn
+import param
+
+from cosymp.diagnostics import nearby_states
+from cosymp.integrate import check_step
+from cosymp.report.style import pair_colors
+from cosymp.summary import long_chunk, max_chunk
+
+from ..jobs import Job, Note
+from ..plotting import SLOTS, Pair, figure, grid, note, pane, series, swatch
+from ..presets import long_horizon
+from ..study import DELTA
+from .base import Feature, FeatureView
+
+LONG_BINS = 20_000
+LONG_CHUNK_SECONDS = 0.3
+LONG_DRAW_SECONDS = 1.0  # the envelopes are published at most this often (each redraw costs the event loop)
+LONG_RUN_BYTES = 256 << 20  # measured peak 179 MB at any horizon (chunked)
+KEYS = ("t", "H_min", "H_max", "vol_min", "vol_max", "det", "symp")
+
+
+@dataclasses.dataclass
+class LongSeries:
+    """Per-bin envelopes of one method's long run: t (bin starts), H~ min/max, the paper's volume
+    estimator min/max, and the max per bin of |det M - 1| and ||M^T J M - J||."""
+
+    label: str
+    method: str
+    parts: dict = dataclasses.field(default_factory=lambda: {k: [] for k in KEYS})
+    failure: str = ""
+
+    def arrays(self):
+        return {k: np.concatenate(v) if v else np.empty(0) for k, v in self.parts.items()}
+
+
+def envelopes(series_):
+    return {x.label: {**x.arrays(), "failure": x.failure, "method": x.method} for x in series_}
+
+
+def _chunk(setups, states, h, n, done, width, i):
+    return long_chunk(setups[i], h, n, *states[i], done, width)
+
+
+class LongRun(Job):
+    """A long run of the study's two methods (see the module's doc); `data` holds the envelopes so
+    far, {label: arrays, failure, method}."""
+
+    study = param.Parameter(doc="The sidebar's study.")
+    T_long = param.Number(default=5e5, label="Long horizon T", doc="Horizon of the long run (chunked; capped at 1e8 steps).")
+    data = param.Dict(default={}, doc="{label: envelope arrays and failure} of the run so far.")
+    setting = param.String(default="", doc="What is (or was last) run.")
+
+    KIND = "long run"
+    WHAT = "a long run"
+
+    def __init__(self, study, **params):
+        params.setdefault("T_long", long_horizon(study.scene))
+        super().__init__(study=study, **params)
+        self._said = set()
+        self._steps_done = 0
+        study.param.watch(self._on_scene, ["scene"])
+
+    def _on_scene(self, event):
+        if not self.running:
+            self.T_long = long_horizon(self.study.scene)
+
+    def say(self, note_):
+        self.study.say(note_)
+
+    @property
+    def partial_interval(self):
+        return LONG_DRAW_SECONDS
+
+    def _inputs(self):
+        s = self.study
+        setups = s.setups()
+        return setups, float(s.h), check_step(s.h, self.T_long), dict(s.values), s.scene
+
+    def _bytes(self, inputs):
+        return LONG_RUN_BYTES
+
+    def _started(self, inputs):
+        setups, h, steps, values, scene = inputs
+        labels = " vs ".join(x.method.label(x.theta) for x in setups)
+        shown = ", ".join(f"{k} = {v}" for k, v in values.items())
+        self._said = set()
+        self._steps_done = 0
+        self.param.update(data={}, status="running",
+                          setting=f"{scene}: {labels}, h = {h:g}, T = {steps * h:g}" + (f", {shown}" if shown else ""))
+
+    def _compute(self, inputs, run):
+        setups, h, steps, _, _ = inputs
+        width = max(1, math.ceil(steps / LONG_BINS))
+        cap = width * max(1, min(max_chunk(x) for x in setups) // width)
+        found = [LongSeries(x.method.label(x.theta), x.method.name) for x in setups]
+        states = [(nearby_states(x.start[0], DELTA, 2 * x.scene.ndof + 1), None) for x in setups]
+        active = [True] * len(setups)
+        done = 0
+        chunk = min(cap, width * max(1, 4096 // width))
+        shown = -math.inf  # the first chunk is drawn at once
+        with ThreadPoolExecutor(len(setups)) as pool:
+            try:
+                while done < steps and any(active):
+                    n = min(chunk, steps - done)
+                    tick = time.perf_counter()
+                    running = [i for i, a in enumerate(active) if a]
+                    outs = list(pool.map(partial(_chunk, setups, states, h, n, done, width), running))
+                    for i, (red, Z, PT, failure) in zip(running, outs):
+                        states[i] = (Z, PT)
+                        if red is not None:
+                            for k, v in red.items():
+                                found[i].parts[k].append(v)
+                        if failure:
+                            active[i] = False
+                            found[i].failure = failure
+                    done += n
+                    now = time.perf_counter()
+                    chunk = min(cap, width * max(1, round(n * LONG_CHUNK_SECONDS / max(now - tick, 1e-3) / width)))
+                    if now - shown >= 0.5 * LONG_DRAW_SECONDS or any(x.failure for x in found):
+                        run.publish(envelopes(found))
+                        shown = now
+                    run.report(done, steps, f"t = {done * h:.6g}")
+            finally:
+                run.publish(envelopes(found))
+        return done, all(active)
+
+    def _partial(self, inputs, data):
+        self.data = data
+        for label, d in data.items():
+            if d["failure"] and label not in self._said:
+                self._said.add(label)
+                self.say(Note("warning", f"long run, {label}: {d['failure']}; showing data up to there"))
+
+    def _on_progress(self, done, total, label):
+        self._steps_done = done
+        super()._on_progress(done, total, label)
+
+    def _cancelled(self, inputs, elapsed):
+        self.status = f"cancelled at t = {self._steps_done * inputs[1]:.6g} after {elapsed:.1f} s"
+
+    def _finish(self, inputs, result):
+        self._steps_done = result[0]
+
+    def _done_in(self, inputs, elapsed):
+        done, reached = self._steps_done, self.run.result[1]
+        self.progress = done / max(inputs[2], 1)
+        self.status = (f"done: {done} steps per method in {elapsed:.1f} s" if reached else
+                       f"stopped early (see the message) after {elapsed:.1f} s")
+
+
+# (title, value label, log axis, the envelope: (t, y) of a method's arrays)
+PLOTS = {
+    "H": ("H~ = H + p_t, per-bin min and max", "H + p_t", False, "H"),
+    "vol": ("paper's estimator: det[X¹ … X²ⁿ⁺¹], per bin", "det[X1 ... X(2n+1)]", False, "vol"),
+    "det": ("rigorous: max |det M_k − 1| per bin", "|det M - 1|", True, "det"),
+    "symp": ("rigorous: max |M_kᵀ J M_k − J| per bin", "|M^T J M - J|", True, "symp"),
+}
+
+
+def band(d, key):
+    """A method's per-bin min and max of H~ or of the volume estimator interleaved (so the curve
+    spans each bin's range), or its per-bin max of a deviation."""
+    t = d["t"]
+    if key in ("H", "vol"):
+        width = t[1] - t[0] if len(t) > 1 else 1.0
+        return np.column_stack([t, t + 0.5 * width]).ravel(), np.column_stack([d[f"{key}_min"], d[f"{key}_max"]]).ravel()
+    return t, d[key]
+
+
+def long_key(data):
+    if not data:
+        return ""
+    methods = [d["method"] for d in data.values()] + [""]
+    colors = pair_colors(methods[0], methods[1])
+    parts = [swatch(color, label, dashed=i == 1) + (f" <span class='caveat'>stopped: {html.escape(d['failure'])}</span>"
+                                                     if d["failure"] else "")
+             for i, ((label, d), color) in enumerate(zip(data.items(), colors))]
+    return "<div class='colorkey'>" + "&emsp;&emsp;".join(parts) + "</div>"
+
+
+class LongRunView(FeatureView):
+    NAME = "long"
+
+    def layout(self):
+        lr = self.state
+        start = pn.widgets.Button(name="Start long run", button_type="primary", disabled=lr.param.running)
+        start.on_click(lambda event: lr.start())
+        cancel = pn.widgets.Button(name="Cancel", button_type="danger", disabled=pn.bind(lambda r: not r, lr.param.running))
+        cancel.on_click(lambda event: lr.cancel())
+        progress = pn.indicators.Progress(value=pn.bind(lambda p: round(100 * p), lr.param.progress), max=100,
+                                          width=260, bar_color="primary", margin=(22, 10))
+        status = pn.bind(lambda s, st: f"<p class='doc'>{html.escape(s)}<br><b>{html.escape(st)}</b></p>",
+                         lr.param.setting, lr.param.status)
+        self.plots = {k: Pair(figure(title, "t", label, logy=log)) for k, (title, label, log, _) in PLOTS.items()}
+        self.key = note("")
+        self.follow(lr, "data")
+        return pn.Column(
+            note("<p>The study's scene, methods, parameters and h, run to the long horizon in chunks off the "
+                 "event loop. The plots show per-bin envelopes (each bin's min and max, or max) as they "
+                 "arrive; the page stays usable meanwhile.</p>"),
+            pn.Row(pn.widgets.FloatInput.from_param(lr.param.T_long, width=180), start, cancel, progress),
+            note(status), self.key,
+            grid(*[pane(p.fig) for p in self.plots.values()]),
+            sizing_mode="stretch_width")
+
+    def update(self):
+        data = self.state.data
+        methods = [d["method"] for d in data.values()] + ["", ""]
+        for key, p in self.plots.items():
+            p.colors(methods[:2])
+            p.set({slot: series(*band(d, PLOTS[key][3]), logy=PLOTS[key][2])
+                   for slot, d in zip(SLOTS, data.values()) if len(d["t"])})
+        self.key.object = long_key(data)
+
+
+FEATURE = Feature("long", "Long run", LongRunView, LongRun, url={"T_long": "T_long"})

@@ -1,0 +1,112 @@
+"""Play: the comparison animated. The orbit is traced up to the current frame (the whole orbit
+faint beneath), the carried loop moves, and a cursor marks the time on H~ and on the loop's area.
+A new frame sends only the traced part, the loop and the cursors' positions."""
+import numpy as np
+import panel as pn
+import param
+
+from ..plotting import Pair, figure, grid, note, pane, path, push, reset_ranges, vline
+from .base import Feature, FeatureView
+from .cloud import closed
+from .common import color_key, comparisons, names, over_time, phase_axes, zcols
+from .structure import time_plots, update_plots
+
+TRACE_POINTS = 2000
+
+
+class Playback(param.Parameterized):
+    """The animation's position (frame of FRAMES) and speed (frames per second)."""
+
+    FRAMES = 200
+    frame = param.Integer(default=200, bounds=(0, 200), doc="Current frame; FRAMES shows the whole run.")
+    fps = param.Selector(default=20, objects={"5 frames/s": 5, "10 frames/s": 10, "20 frames/s": 20,
+                                              "40 frames/s": 40}, doc="Playback speed.")
+
+    @property
+    def fraction(self):
+        return self.frame / self.FRAMES
+
+    def release(self):
+        """Nothing runs in the background."""
+
+
+def traced(x, y, fraction):
+    """The part of an orbit up to `fraction` of the run (at most TRACE_POINTS points), and its end."""
+    k = int(fraction * (len(x) - 1)) if len(x) else 0
+    step = max(1, len(x) // TRACE_POINTS)
+    return (np.append(x[:k:step], x[k:k + 1]), np.append(y[:k:step], y[k:k + 1])), (x[k:k + 1], y[k:k + 1])
+
+
+class PlayView(FeatureView):
+    NAME = "play"
+
+    def layout(self):
+        pb = self.state
+        self.orbit_fig = figure("orbit, traced (dot: now)", "q", "p")
+        self.faint = Pair(self.orbit_fig, width=1)
+        for line in self.faint.lines.values():
+            line.glyph.line_alpha = 0.2
+        self.trace = Pair(self.orbit_fig, width=2)
+        self.now = Pair(self.orbit_fig, width=0, start=True)
+        self.loop = Pair(figure("loop of initial states, now", "q1", "p1"), width=2)
+        self.energy = Pair(figure("H~ = H + p_t", "t", "H + p_t"))
+        self.plots = time_plots(["area"])
+        self.cursors = [vline(self.energy.fig), vline(self.plots["area"].fig)]
+        self.key = note("")
+        self.clock = note("", width=220, sizing_mode=None)
+        self._scene = None
+        player = pn.widgets.Player.from_param(pb.param.frame, start=0, end=Playback.FRAMES, loop_policy="once",
+                                              interval=pn.bind(lambda fps: int(1000 / fps), pb.param.fps),
+                                              show_value=False, show_loop_controls=False, width=420)
+        self.follow(self.study, "results")
+        pb.param.watch(self._on_frame, "frame")
+        return pn.Column(
+            pn.Row(player, pn.widgets.Select.from_param(pb.param.fps, name="Speed", width=140), self.clock),
+            self.key,
+            grid(pane(self.orbit_fig), pane(self.loop.fig)),
+            grid(pane(self.energy.fig), pane(self.plots["area"].fig)),
+            sizing_mode="stretch_width")
+
+    def _on_frame(self, event):
+        if self.visible and self._layout is not None and not self._stale:
+            push(self.frame)
+
+    def update(self):
+        runs = self.study.results
+        if runs is None:
+            return
+        if runs.scene != self._scene:
+            for fig in (self.orbit_fig, self.loop.fig):
+                reset_ranges(fig)
+            i, j, xl, yl, _ = phase_axes(runs.scene)[0]
+            self.orbit_fig.xaxis.axis_label, self.orbit_fig.yaxis.axis_label = xl, yl
+            self._scene = runs.scene
+        i, j = phase_axes(runs.scene)[0][:2]
+        self.orbits = {slot: zcols(c.run, i, j) for slot, c in comparisons(runs).items()}
+        for p in (self.faint, self.trace, self.now, self.loop, self.energy):
+            p.colors(names(runs))
+        self.faint.set({slot: path(*xy) for slot, xy in self.orbits.items()})
+        self.energy.set(over_time(runs, lambda c: (c.run.t, c.run.H_ext[:, 0])))
+        update_plots(self.plots, runs)
+        self.key.object = color_key(runs)
+        self.frame()
+
+    def frame(self):
+        runs = self.study.results
+        f = self.state.fraction
+        ends = {slot: traced(*xy, f) for slot, xy in self.orbits.items()}
+        self.trace.set({slot: line for slot, (line, _) in ends.items()})
+        self.now.set({slot: now for slot, (_, now) in ends.items()})
+        loops = {}
+        for slot, c in comparisons(runs).items():
+            if c.cloud is not None:
+                k = round(f * (len(c.cloud.t) - 1))
+                loops[slot] = closed(c.cloud.q[k, :, 0], c.cloud.p[k, :, 0])
+        self.loop.set(loops)
+        T = max((c.run.t[-1] for c in comparisons(runs).values()), default=0.0)
+        for cursor in self.cursors:
+            cursor.location = T * f
+        self.clock.object = f"<p class='clock'>t = {T * f:.4g} of {runs.T:g}</p>"
+
+
+FEATURE = Feature("play", "Play", PlayView, lambda study: Playback())

@@ -1,0 +1,302 @@
+"""Stability map: one measure of the sidebar's method over two varied quantities (scene parameters,
+h, T or θ), computed by cosymp.sweep in the background with progress and Cancel, drawn as a heat
+map (failed runs black); a click on a cell opens that run in Orbits."""
+import html
+import os
+
+import numpy as np
+import panel as pn
+import param
+from bokeh.models import ColorBar, HoverTool, LinearColorMapper, LogColorMapper, TapTool
+from bokeh.palettes import Viridis256
+from bokeh.transform import transform
+
+from cosymp import sweep
+from cosymp import workprecision as wp
+from cosymp.errors import InputError
+from cosymp.methods import METHODS
+from cosymp.scenes import SCENES
+
+from ..jobs import Job
+from ..plotting import FLOOR, figure, note, pane, source
+from ..study import soft_range, theta_for
+from .base import Feature, FeatureView
+from .workprecision import run_controls
+
+MAP_MAX_SIDE = 100
+MAP_MAX_STEPS = 200_000_000
+# First axes per scene: (x name, start, stop, log), (y name, start, stop, log).
+MAP_AXES = {
+    "decaying": (("h", 0.05, 3.0, True), ("lam", 0.1, 5.0, False)),
+    "damped": (("h", 0.05, 3.0, True), ("gamma", -0.5, 0.5, False)),
+    "modulated": (("alpha", 0.5, 4.5, False), ("eps", 0.0, 0.8, False)),
+    "charged": (("h", 0.001, 0.1, True), ("B0", 0.0, 2.0, False)),
+    "kapitza": (("nu", 5.0, 80.0, False), ("a", 0.0, 0.5, False)),
+}
+LOG_MEASURES = ("H_ext_max_abs", "det_max_dev", "error_final")
+HEIGHT = 480
+SIGNIFICANT = 4  # a cell opened in Orbits carries its values to this many significant digits
+
+
+def map_axes(scene):
+    """The Stability map's first axes for a scene: its MAP_AXES entry, else h on a log axis around
+    the scene's step by its first parameter that is not an initial condition, over its slider range."""
+    if scene.name in MAP_AXES:
+        return MAP_AXES[scene.name]
+    p = next(p for p in scene.params if not p.initial and not p.choices and not isinstance(p.default, str))
+    return ("h", scene.h / 4, 8 * scene.h, True), (p.name, *soft_range(p), False)
+
+
+def map_bytes(scene, points_steps, threads):
+    """What a sweep holds at once: per thread one chunk of every-step records (t, z, p_t, H), its
+    copy for the tangent maps and the maps (2n x 2n each), plus the grid's results."""
+    m = 2 * scene.ndof
+    per_step = 8 * (2 * (m + 3) + m * m)
+    return threads * min(wp.CHUNK, points_steps + 1) * per_step + (8 << 20)
+
+
+def significant(x):
+    return float(f"{x:.{SIGNIFICANT}g}")
+
+
+class StabilityMap(Job):
+    """A measure of the study's method over a grid of two varied names (scene parameters, h, T or θ)
+    with the study's other values, computed by cosymp.sweep on this machine's cores in the
+    computation's thread. A cell can be opened in the Orbits view (`open_cell`)."""
+
+    study = param.Parameter(doc="The sidebar's study.")
+    measure = param.Selector(default="growth", objects=list(sweep.MEASURES), doc="What each cell shows.")
+    x = param.Selector(default="h", objects=["h"], label="x axis")
+    x_start = param.Number(default=0.05, label="from")
+    x_stop = param.Number(default=3.0, label="to")
+    x_log = param.Boolean(default=True, label="log x")
+    nx = param.Integer(default=30, bounds=(2, MAP_MAX_SIDE), label="cells in x")
+    y = param.Selector(default="gamma", objects=["gamma"], label="y axis")
+    y_start = param.Number(default=-0.5, label="from")
+    y_stop = param.Number(default=0.5, label="to")
+    y_log = param.Boolean(default=False, label="log y")
+    ny = param.Integer(default=30, bounds=(2, MAP_MAX_SIDE), label="cells in y")
+    result = param.Parameter(doc="The last completed sweep (cosymp.sweep.Result).")
+    setting = param.String(default="", doc="What the map was computed on.")
+
+    KIND = "stability map"
+    WHAT = "this map"
+    PREFIX = "stability map: "
+
+    def __init__(self, study, **params):
+        super().__init__(study=study, **params)
+        self.job = None
+        self._on_scene()
+        study.param.watch(self._on_scene, ["scene", "method"])
+
+    def say(self, note_):
+        self.study.say(note_)
+
+    def _on_scene(self, *events):
+        names = sweep.variables(self.study.scene_obj, METHODS[self.study.method])
+        self.param.x.objects = self.param.y.objects = names
+        if events and all(e.name == "method" for e in events) and {self.x, self.y} <= set(names):
+            return
+        (xn, x0, x1, xl), (yn, y0, y1, yl) = map_axes(self.study.scene_obj)
+        self.param.update(x=xn, x_start=x0, x_stop=x1, x_log=xl, y=yn, y_start=y0, y_stop=y1, y_log=yl)
+
+    def _inputs(self):
+        s = self.study
+        if self.x == self.y:
+            raise InputError(f"x and y both vary {self.x}: choose two different names")
+        axes = [sweep.Axis.make(self.x, self.x_start, self.x_stop, self.nx, self.x_log),
+                sweep.Axis.make(self.y, self.y_start, self.y_stop, self.ny, self.y_log)]
+        varied = {self.x, self.y}
+        fixed = {k: v for k, v in s.values.items() if k not in varied}
+        run = {k: None if k in varied else v for k, v in
+               (("theta", theta_for(s.method, s.theta)), ("h", s.h), ("T", s.T))}
+        plan = sweep.plan(s.scene, s.method, axes, (self.measure,), fixed, **run)
+        counts, shared = plan.step_counts()
+        steps = int(counts.sum()) * shared
+        if steps > MAP_MAX_STEPS:
+            raise InputError(f"this map takes {steps:.3g} steps in all, beyond this view's {MAP_MAX_STEPS:.0e}: "
+                             "use fewer cells, larger h or a shorter T (or run `cosymp sweep` on a cluster)")
+        return plan
+
+    def _bytes(self, plan):
+        return map_bytes(SCENES[plan.scene], int(plan.step_counts()[0].max()), os.cpu_count() or 1)
+
+    def _describe(self, plan):
+        (ax, ay) = plan.axes
+        fixed = ", ".join(f"{k} = {v}" for k, v in plan.values)
+        return (f"{plan.measures[0]} of {plan.method} on {plan.scene}" + (f" ({fixed})" if fixed else "")
+                + f": {ax.name} {ax.values[0]:g}…{ax.values[-1]:g} × {ay.name} {ay.values[0]:g}…{ay.values[-1]:g}, "
+                f"{plan.size} cells, h = {plan.h:g}, T = {plan.T:g} where not varied")
+
+    def _started(self, plan):
+        self.status = f"running: {self._describe(plan)}"
+
+    def _compute(self, plan, run):
+        return sweep.run(plan, progress=run.report)
+
+    def _finish(self, plan, result):
+        self.job = plan
+        self.param.update(result=result, setting=self._describe(plan))
+
+    def release(self):
+        """The page is gone: drop the map without redrawing it."""
+        super().release()
+        with param.parameterized.discard_events(self):
+            self.result = None
+
+    def open_cell(self, i, j):
+        """Open cell (i along x, j along y) of the last map in the Orbits view: the map's scene,
+        method and values with that cell's varied values (to SIGNIFICANT digits)."""
+        plan = self.job
+        point = {plan.axes[0].name: significant(plan.axes[0].values[i]),
+                 plan.axes[1].name: significant(plan.axes[1].values[j])}
+        values = dict(plan.values)
+        updates = {"method": plan.method, "view": "compare"}
+        for name, v in point.items():
+            if name in sweep.RUN_NAMES:
+                updates[name] = v
+            else:
+                values[name] = v
+        if plan.theta is not None and "theta" not in point:
+            updates["theta"] = plan.theta
+        updates.update(h=point.get("h", plan.h), T=point.get("T", plan.T))
+        if plan.scene != self.study.scene:
+            self.study.scene = plan.scene
+        self.study.param.update(values=values, **updates)
+
+
+def map_command(plan):
+    """The `cosymp sweep` command line of a plan."""
+    fixed = "".join(f" --set {k}={v}" for k, v in plan.values)
+    vary = "".join(f" --vary {a.name}={a.values[0]:g}:{a.values[-1]:g}:{len(a.values)}" + (":log" if a.log else "")
+                   for a in plan.axes)
+    theta = f" --theta {plan.theta:g}" if plan.theta is not None else ""
+    return (f"cosymp sweep {plan.scene} --method {plan.method}{vary} --measure {' '.join(plan.measures)} "
+            f"--h {plan.h:g} --T {plan.T:g}{theta}{fixed} -o map.csv")
+
+
+def edges(values, log):
+    """Cell edges around the grid's values (geometric midpoints on a log axis)."""
+    v = np.log(values) if log else np.asarray(values, float)
+    if len(v) == 1:
+        e = v[0] + np.array([-0.5, 0.5]) * (0.2 if log else max(abs(v[0]), 1.0))
+    else:
+        mid = 0.5 * (v[1:] + v[:-1])
+        e = np.concatenate([[v[0] - (mid[0] - v[0])], mid, [v[-1] + (v[-1] - mid[-1])]])
+    return np.exp(e) if log else e
+
+
+def cells(result):
+    """The quads of a sweep's single measure (x fastest within each y row is not assumed: C order
+    of the grid, x the first axis): their edges, values and grid indices."""
+    plan = result.plan
+    ax, ay = plan.axes
+    key = plan.measures[0]
+    Z = result.values[key]
+    xe, ye = edges(ax.values, ax.log), edges(ay.values, ay.log)
+    i, j = np.meshgrid(np.arange(len(ax.values)), np.arange(len(ay.values)), indexing="ij")
+    i, j = i.ravel(), j.ravel()
+    z = Z.ravel()
+    if key in LOG_MEASURES:
+        z = np.where(np.isnan(z), np.nan, np.maximum(z, FLOOR))
+    return {"left": xe[i], "right": xe[i + 1], "bottom": ye[j], "top": ye[j + 1], "z": z, "i": i, "j": j,
+            "x": np.asarray(ax.values)[i], "y": np.asarray(ay.values)[j]}
+
+
+class MapPlot:
+    """The heat map for one pair of axis kinds (linear or log): quads coloured by the measure, a
+    colour bar, hover, and a click that calls on_tap(i, j)."""
+
+    def __init__(self, logx, logy, logz, on_tap):
+        self.fig = figure("", "x", "y", logx=logx, logy=logy, height=HEIGHT)
+        self.source = source()
+        self.mapper = (LogColorMapper if logz else LinearColorMapper)(palette=Viridis256, nan_color="black")
+        quads = self.fig.quad(left="left", right="right", bottom="bottom", top="top", source=self.source,
+                              fill_color=transform("z", self.mapper), line_color=None, nonselection_fill_alpha=1.0)
+        self.fig.add_layout(ColorBar(color_mapper=self.mapper, width=12), "right")
+        self.fig.add_tools(HoverTool(renderers=[quads], tooltips=[("x", "@x{0.[0000]}"), ("y", "@y{0.[0000]}"),
+                                                                  ("value", "@z")]), TapTool(renderers=[quads]))
+        self.source.selected.on_change("indices", lambda attr, old, new: new and on_tap(
+            int(self.source.data["i"][new[0]]), int(self.source.data["j"][new[0]])))
+        self.pane = pane(self.fig, min_height=HEIGHT + 10)
+
+    def set(self, result):
+        plan = result.plan
+        ax, ay = plan.axes
+        data = cells(result)
+        z = data["z"][np.isfinite(data["z"])]
+        if len(z):
+            lo, hi = float(z.min()), float(z.max())
+            self.mapper.update(low=lo, high=hi if hi > lo else lo + (abs(lo) or 1.0))
+        self.source.selected.indices = []
+        self.source.data = data
+        self.fig.title.text = f"{plan.measures[0]} of {plan.method} on {plan.scene}"
+        self.fig.xaxis.axis_label, self.fig.yaxis.axis_label = ax.name, ay.name
+
+
+MAP_TEXT = ("<p>One measure of the sidebar's method over a grid of two varied quantities (scene parameters, h, T "
+            "or θ), every other value taken from the sidebar. Each cell is one run from the scene's initial "
+            "state: <b>growth</b> is ln σ<sub>max</sub> of the product of the method's one-step maps, over T (a "
+            "finite-time Lyapunov exponent of the method: 0 where its map stays bounded, the Floquet exponent "
+            "inside a parametric-resonance tongue, ln|R(ih)|/h for RK4 beyond its stability limit); "
+            "<b>H_ext_max_abs</b> the largest |H~| = |H + p_t| over the run; <b>det_max_dev</b> the largest "
+            "|det M<sub>k</sub> − 1| of the one-step maps; <b>error_final</b> the relative error at T against the "
+            "exact flow or a fine RK8 run. Black cells: the run failed (the line below the map says why). The "
+            "same grid runs from the command line, also on a Dask cluster: <code>{command}</code>. "
+            "<b>Click a cell</b> to open that run in the Orbits view.</p>")
+
+
+def map_failures(result):
+    if result is None:
+        return ""
+    failed, first = result.failures()
+    if not failed:
+        return (f"<p class='doc'>Every one of the {result.plan.size} runs completed ({html.escape(result.where)}, "
+                f"{result.wall_s:.1f} s).</p>")
+    return (f"<p class='doc'><b>{failed} of {result.plan.size} runs failed</b> (black cells), e.g.: "
+            f"{html.escape(first)}</p>")
+
+
+class StabilityMapView(FeatureView):
+    NAME = "map"
+
+    def layout(self):
+        m = self.state
+        row, status = run_controls(m, "Compute map")
+        self.plots = {}
+        self.box = pn.Column(sizing_mode="stretch_width")
+        self.text = note("")
+        self.failures = note("")
+        self.follow(m, "result")
+
+        def axis(prefix):
+            p = m.param
+            return pn.Row(pn.widgets.Select.from_param(p[prefix], width=120),
+                          pn.widgets.FloatInput.from_param(p[f"{prefix}_start"], width=110),
+                          pn.widgets.FloatInput.from_param(p[f"{prefix}_stop"], width=110),
+                          pn.widgets.IntInput.from_param(p[f"n{prefix}"], width=100),
+                          pn.widgets.Checkbox.from_param(p[f"{prefix}_log"], margin=(30, 10, 10, 10)))
+
+        return pn.Column(self.text, pn.widgets.Select.from_param(m.param.measure, width=200), axis("x"), axis("y"),
+                         row, status, self.box, self.failures, sizing_mode="stretch_width")
+
+    def update(self):
+        m = self.state
+        result = m.result
+        self.text.object = MAP_TEXT.format(command=html.escape(map_command(result.plan)) if result else
+                                           "cosymp sweep SCENE --vary NAME=START:STOP:NUM ...")
+        self.failures.object = map_failures(result)
+        if result is None:
+            self.box.objects = [note("<p class='doc'>No map yet: choose the axes and press Compute map.</p>")]
+            return
+        ax, ay = result.plan.axes
+        kind = (ax.log, ay.log, result.plan.measures[0] in LOG_MEASURES)
+        if kind not in self.plots:
+            self.plots[kind] = MapPlot(*kind, m.open_cell)
+        plot = self.plots[kind]
+        plot.set(result)
+        if self.box.objects != [plot.pane]:
+            self.box.objects = [plot.pane]
+
+
+FEATURE = Feature("map", "Stability map", StabilityMapView, StabilityMap)

@@ -1,0 +1,71 @@
+"""Structure: volume and symplectic form of both methods, the paper's estimators beside the
+rigorous checks. It shows the sidebar's comparison."""
+import pandas as pd
+import panel as pn
+
+from ..plotting import Pair, figure, grid, note, pane, table
+from .base import Feature, FeatureView
+from .common import color_key, names, numbers, over_time
+from .orbits import NUMBERS_TEXT
+
+VOLUME_TEXT = ("<h4>Volume form</h4><p class='doc'>Left, the paper's estimator as printed: the determinant "
+               "of the one-step increments X<sup>i</sup> = z<sup>i</sup><sub>k+1</sub> − z<sup>i</sup><sub>k</sub> "
+               "of 2n+1 nearby runs in (q, t, p) (three for one degree of freedom). Right, the rigorous "
+               "check: |det M<sub>k</sub> − 1| of the one-step tangent map on the time slice, 0 to round-off "
+               "for a volume-preserving method (exact zeros are drawn at 1e-17).</p>")
+SYMPLECTIC_TEXT = ("<h4>Symplectic form</h4><p class='doc'>The paper's estimator as printed: ω(X¹, X²) of "
+                   "the one-step increments of two nearby runs. Rigorous checks: max |M<sub>k</sub>ᵀ J "
+                   "M<sub>k</sub> − J| of the one-step tangent map (0 to round-off when symplectic), "
+                   "ω(δ¹, δ²)/δ² of the separations δ<sup>i</sup> = z<sup>i</sup> − z<sup>0</sup> of "
+                   "nearby runs, and the area enclosed by a carried loop of initial states (both stay 1 "
+                   "when symplectic).</p>")
+
+# (title, value label, log axis, the series of a comparison)
+PLOTS = {
+    "paper_volume": ("paper's estimator: det[X¹ … X²ⁿ⁺¹]", "det[X1 ... X(2n+1)]", False,
+                     lambda c: (c.run.t[1:], c.paper_volume)),
+    "det": ("rigorous: |det M_k − 1|", "|det M - 1|", True, lambda c: (c.run.t[:-1], c.det_dev)),
+    "paper_omega": ("paper's estimator: ω(X¹, X²)", "omega(X1, X2)", False, lambda c: (c.run.t[1:], c.paper_omega)),
+    "symp": ("rigorous: max |M_kᵀ J M_k − J|", "|M^T J M - J|", True, lambda c: (c.run.t[:-1], c.symp_dev)),
+    "separation": ("rigorous: ω(δ¹, δ²)/δ² of nearby runs", "omega(d1, d2) / delta^2", False,
+                   lambda c: (c.run.t, c.separation_omega)),
+    "area": ("carried loop: area / initial area", "area / initial area", False, lambda c: (c.cloud.t, c.cloud_area)),
+}
+
+
+def time_plots(keys):
+    """{key: Pair} of the PLOTS named."""
+    return {k: Pair(figure(PLOTS[k][0], "t", PLOTS[k][1], logy=PLOTS[k][2])) for k in keys}
+
+
+def update_plots(plots, runs):
+    for k, p in plots.items():
+        p.colors(names(runs))
+        p.set(over_time(runs, PLOTS[k][3], logy=PLOTS[k][2]))
+
+
+class StructureView(FeatureView):
+    NAME = "structure"
+
+    def layout(self):
+        self.plots = time_plots(PLOTS)
+        self.key = note("")
+        self.table = table(["quantity"])
+        self.follow(self.study, "results")
+        return pn.Column(
+            self.key, note(VOLUME_TEXT),
+            grid(*[pane(self.plots[k].fig) for k in ("paper_volume", "det")]),
+            note(SYMPLECTIC_TEXT),
+            grid(*[pane(self.plots[k].fig) for k in ("paper_omega", "symp", "separation", "area")]),
+            note(NUMBERS_TEXT), self.table, sizing_mode="stretch_width")
+
+    def update(self):
+        runs = self.study.results
+        if runs is None:
+            return
+        update_plots(self.plots, runs)
+        self.key.object = color_key(runs)
+        self.table.value = pd.DataFrame(numbers(runs))
+
+
+FEATURE = Feature("structure", "Structure", StructureView)

@@ -1,0 +1,519 @@
+"""Work–precision: error and max |H~| against wall time for the chosen methods over step sizes and
+scipy's solve_ivp over tolerances, the time each needs to reach 1e-6 and 1e-9; and below, the
+long-horizon growth of the error and of |H~| at one h. Both are measured on demand (Start), in
+the background, with progress and Cancel; a click on a cosymp point opens that run in Orbits."""
+import dataclasses
+import html
+import math
+
+import numpy as np
+import pandas as pd
+import panel as pn
+import param
+from bokeh.models import HoverTool, LegendItem, TapTool
+
+from cosymp import workprecision as wp
+from cosymp.errors import InputError
+from cosymp.integrate import Setup, check_step
+from cosymp.methods import METHODS
+from cosymp.report.style import method_color
+from cosymp.scenes import SCENES
+
+from ..jobs import Job, Note
+from ..memory import MB
+from ..plotting import FLOOR, figure, legend_outside, note, pane, source, table
+from ..study import theta_for
+from .base import Feature, FeatureView
+
+WP_MAX_STEPS = 1 << 17
+WP_BUDGET = 0.05
+WP_RTOLS = tuple(10.0 ** -k for k in range(3, 13))
+DRIFT_TOPS = (1e3, 1e4, 1e5, 1e6)
+DRIFT_DEFAULT_STEPS = 1_000_000
+MEASURE_BYTES = 96 * MB  # measured peak: work-precision 43 MB, long horizons 29 MB
+HEIGHT = 340
+WP_KEYS = {"error": "relative error at T", "H_ext_max_abs": "max |H~| over the run"}
+DRIFT_KEYS = {"error": "relative error at T", "H_ext_max_abs": "max |H~| up to T"}
+HOVER = [("solver", "@solver"), ("run", "@run"), ("steps", "@steps"), ("error at T", "@error_text"),
+         ("wall time", "@wall_text"), ("max |H~|", "@H_text"), ("max |det M − 1|", "@det_text")]
+
+
+def applicable(scene, names):
+    """The names of the methods that apply to the scene (never the exact flow: it is the reference)."""
+    return [m for m in names if m != "exact" and METHODS[m].refusal(SCENES[scene]) is None]
+
+
+@dataclasses.dataclass(frozen=True)
+class Measured:
+    """What a measurement ran: scene, its parameter values, θ, the methods (name, θ or None per
+    solver name), h (drift) or T (work-precision)."""
+
+    scene: str
+    values: dict
+    theta: float
+    solvers: dict
+    h: float = None
+    T: float = None
+    horizons: tuple = ()
+    peers: bool = False
+
+    @property
+    def method_theta(self):
+        """θ for the methods that take one, None when none of them does."""
+        return next((th for _, th in self.solvers.values() if th is not None), None)
+
+    def describe(self):
+        values = ", ".join(f"{k} = {v}" for k, v in self.values.items())
+        what = [f"T = {self.T:g}"] if self.T is not None else [f"h = {self.h:g}", f"T up to {self.horizons[-1]:g}"]
+        if any(th is not None for _, th in self.solvers.values()):
+            what.append(f"θ = {self.theta:g}")
+        return f"{self.scene}" + (f" ({values})" if values else "") + ": " + ", ".join(what)
+
+
+def solvers_of(scene, methods, values, theta):
+    """{solver name as cosymp.workprecision names it: (method, θ or None)}, or InputError."""
+    if not methods:
+        raise InputError("no methods chosen: choose at least one method")
+    out = {}
+    for m in methods:
+        s = Setup.make(scene, m, values, theta_for(m, theta))
+        out[wp.solver_name(s)] = (m, s.theta)
+    return out
+
+
+class Measurement(Job):
+    """A measurement of the study's scene, started by a button (see jobs.Job): its rows, and what
+    they were measured on."""
+
+    study = param.Parameter(doc="The sidebar's study.")
+    rows = param.List(default=[], doc="The rows of the last completed measurement.")
+    setting = param.String(default="", doc="What the rows were measured on.")
+    methods = param.ListSelector(default=[], objects=list(METHODS), doc="cosymp's methods to measure.")
+
+    DEFAULTS = ()
+
+    def __init__(self, study, **params):
+        super().__init__(study=study, **params)
+        self.job = None
+        self.param.methods.objects = applicable(study.scene, METHODS)
+        if "methods" not in params:
+            self.methods = applicable(study.scene, self.DEFAULTS)
+        study.param.watch(self._on_scene, ["scene"])
+
+    def _on_scene(self, event):
+        self.param.methods.objects = applicable(self.study.scene, METHODS)
+        self.methods = applicable(self.study.scene, self.DEFAULTS)
+
+    @property
+    def PREFIX(self):
+        return f"{self.KIND}: "
+
+    def say(self, note_):
+        self.study.say(note_)
+
+    def _bytes(self, inputs):
+        return MEASURE_BYTES
+
+    def _started(self, inputs):
+        self.status = f"running: {self._describe(inputs)}"
+
+    def _finish(self, inputs, rows):
+        self.job = inputs
+        self.param.update(rows=rows, setting=self._describe(inputs))
+
+
+class WorkPrecision(Measurement):
+    """Error at T against wall time for the chosen methods over step sizes (and scipy's
+    solve_ivp over tolerances), on the study's scene, parameters, θ and T. A cosymp point can be
+    opened in the Orbits view (`open_row`)."""
+
+    peers = param.Boolean(default=True, label="with scipy's solve_ivp (RK45, DOP853, LSODA)",
+                          doc="Also measure scipy's adaptive solvers over tolerances 1e-3 ... 1e-12.")
+    KIND = "work–precision"
+    DEFAULTS = wp.DEFAULT_METHODS
+
+    def _inputs(self):
+        s = self.study
+        wp.check_horizon(s.T)
+        first = math.ceil(s.T / s.scene_obj.time_scale)
+        if first > WP_MAX_STEPS:
+            raise InputError(f"T = {s.T:g} takes at least {first} steps per run at the scene's time scale, beyond "
+                             f"this view's {WP_MAX_STEPS} steps per run: shorten T (the long horizons below go "
+                             "further at one h)")
+        return Measured(s.scene, dict(s.values), float(s.theta), solvers_of(s.scene, self.methods, s.values, s.theta),
+                        T=float(s.T), peers=bool(self.peers))
+
+    def _describe(self, job):
+        peers = ", scipy's RK45, DOP853, LSODA" if job.peers else ""
+        return f"{job.describe()}; {len(job.solvers)} methods{peers}"
+
+    def _compute(self, job, run):
+        return wp.measure(job.scene, [m for m, _ in job.solvers.values()], job.values, job.T, theta=job.method_theta,
+                          peers=job.peers, rtols=WP_RTOLS, max_steps=WP_MAX_STEPS, budget=WP_BUDGET,
+                          progress=run.report)
+
+    def open_row(self, row):
+        """Open a cosymp run in the Orbits view: the measured scene and parameters, the run's
+        method (and θ), its h and the measured T. A scipy run cannot be opened there: a note says so."""
+        if row["kind"] != "cosymp":
+            self.say(Note("info", f"{row['solver']} at rtol = {row['rtol']:.0e} is scipy's solve_ivp, which the "
+                                  "main view does not run: click a point of a cosymp method to open it"))
+            return
+        job = self.job
+        method, theta = job.solvers[row["solver"]]
+        updates = {"scene": job.scene, "values": dict(job.values), "method": method, "h": float(row["h"]),
+                   "T": float(row["T"]), "view": "compare"}
+        if theta is not None:
+            updates["theta"] = theta
+        self.study.param.update(**updates)
+
+
+def default_top(h):
+    """The largest horizon of DRIFT_TOPS with at most DRIFT_DEFAULT_STEPS steps of h (at least the first)."""
+    fits = [T for T in DRIFT_TOPS if T / h <= DRIFT_DEFAULT_STEPS * (1 + 1e-9)]
+    return fits[-1] if fits else DRIFT_TOPS[0]
+
+
+class LongHorizons(Measurement):
+    """Error and max |H~| at growing horizons (DRIFT_HORIZONS up to `T_max`), each chosen method
+    at one step h, on the study's scene, parameters and θ. If the reference itself fails beyond
+    some horizon (a scene whose state grows past floating point), the horizons below it are shown
+    and a note says so."""
+
+    h = param.Number(default=0.1, label="Step h", doc="The step of every method (default: the scene's).")
+    T_max = param.Selector(default=1e4, objects={f"{T:.0e}": T for T in DRIFT_TOPS}, label="Largest horizon",
+                           doc="The horizons are 1e2, 2e2, 5e2, 1e3, ... up to this one.")
+    KIND = "long horizons"
+    DEFAULTS = wp.DRIFT_METHODS
+
+    def __init__(self, study, **params):
+        super().__init__(study, **params)
+        self.param.update({k: v for k, v in self._defaults().items() if k not in params})
+
+    def _defaults(self):
+        scene = self.study.scene_obj
+        return {"methods": applicable(scene.name, wp.DRIFT_METHODS), "h": scene.h, "T_max": default_top(scene.h)}
+
+    def _on_scene(self, event):
+        self.param.methods.objects = applicable(self.study.scene, METHODS)
+        self.param.update(self._defaults())
+
+    def _inputs(self):
+        s = self.study
+        h = float(self.h)
+        steps = check_step(h, self.T_max)
+        if steps > wp.DRIFT_MAX_STEPS:
+            raise InputError(f"T/h = {steps:.3g} steps per method is beyond this view's limit of "
+                             f"{wp.DRIFT_MAX_STEPS:.0e}: increase h or choose a smaller largest horizon")
+        horizons = tuple(T for T in wp.DRIFT_HORIZONS if h < T <= self.T_max)
+        if not horizons:
+            raise InputError(f"h = {h:g} is not below the horizons: choose h < {self.T_max:g}")
+        return Measured(s.scene, dict(s.values), float(s.theta), solvers_of(s.scene, self.methods, s.values, s.theta),
+                        h=h, horizons=horizons)
+
+    def _describe(self, job):
+        return f"{job.describe()}; {', '.join(job.solvers)}"
+
+    def _compute(self, job, run):
+        return wp.drift(job.scene, [m for m, _ in job.solvers.values()], job.values, job.h, list(job.horizons),
+                        theta=job.method_theta, progress=run.report)
+
+    def _finish(self, job, rows):
+        short = [r for r in rows if r["status"].startswith(wp.REFERENCE_SHORT)]
+        if short:
+            top = max((r["T"] for r in rows if not r["status"].startswith(wp.REFERENCE_SHORT)), default=0.0)
+            job = dataclasses.replace(job, horizons=tuple(T for T in job.horizons if T <= top * (1 + 1e-9)))
+            self.say(Note("warning", f"long horizons shown up to T = {top:g} only: {short[0]['status']}"))
+            rows = [r for r in rows if r not in short]
+        super()._finish(job, rows)
+
+
+# ---------------------------------------------------------------- the view
+
+
+def finite(x):
+    return isinstance(x, (int, float)) and math.isfinite(x)
+
+
+def _sci(x, unit=""):
+    return f"{x:.3g}{unit}" if finite(x) else "–"
+
+
+def run_text(row):
+    """The step or the tolerance of a work-precision row."""
+    return f"h = {row['h']:.4g}" if row["kind"] == "cosymp" else f"rtol = {row['rtol']:.0e}"
+
+
+def wp_points(rows, key):
+    """The rows drawn in the work-precision plot of `key` ('error' or 'H_ext_max_abs'): those with
+    a finite wall time and a finite value, in row order (point i of the plot's points is row i)."""
+    return [r for r in rows if finite(r["wall_s"]) and finite(r[key])]
+
+
+class Curves:
+    """Log-log curves, one per solver (created when a solver first appears, then kept), in the
+    solver's colour, scipy's dashed, with a legend beside the plot."""
+
+    def __init__(self, fig):
+        self.fig = fig
+        self.lines = {}
+        self.legend = None
+
+    def set(self, curves):
+        """curves: {label: (x, y, dashed, solver)} drawn in the solver's colour; every other curve
+        is emptied, and the legend lists these."""
+        for label, (src, _) in self.lines.items():
+            if label not in curves:
+                src.data = {"x": np.empty(0), "y": np.empty(0)}
+        for label, (x, y, dashed, solver) in curves.items():
+            if label not in self.lines:
+                src = source()
+                self.lines[label] = (src, self.fig.line("x", "y", source=src, line_width=1.5))
+            src, r = self.lines[label]
+            r.glyph.update(line_color=method_color(solver), line_dash="dashed" if dashed else "solid")
+            src.data = {"x": np.asarray(x, float), "y": np.asarray(y, float)}
+        items = [(label, [self.lines[label][1]]) for label in curves]
+        if self.legend is None:
+            self.legend = legend_outside(self.fig, items)
+        else:
+            self.legend.items = [LegendItem(label=label, renderers=rs) for label, rs in items]
+
+
+class WorkPrecisionPlot:
+    """key against wall time: a line per solver (its runs in order of refinement) and every point
+    (hover: what the run was; a click on a cosymp point calls on_tap(row))."""
+
+    def __init__(self, key, title, on_tap):
+        self.key = key
+        self.fig = figure(title, "wall time (s)", WP_KEYS[key], logx=True, logy=True, height=HEIGHT)
+        self.curves = Curves(self.fig)
+        self.points = source()
+        dots = self.fig.scatter("x", "y", source=self.points, size=7, color="color", marker="marker",
+                                nonselection_alpha=1.0)
+        self.fig.add_tools(HoverTool(renderers=[dots], tooltips=HOVER), TapTool(renderers=[dots]))
+        self.rows = []
+        self.points.selected.on_change("indices", lambda attr, old, new: new and on_tap(self.rows[new[0]]))
+
+    def set(self, rows):
+        pts = wp_points(rows, self.key)
+        self.rows = pts
+        curves = {}
+        for solver in dict.fromkeys(r["solver"] for r in pts):
+            mine = [r for r in pts if r["solver"] == solver]
+            curves[solver] = ([r["wall_s"] for r in mine], [max(r[self.key], FLOOR) for r in mine],
+                              mine[0]["kind"] == "scipy", solver)
+        self.curves.set(curves)
+        self.points.selected.indices = []
+        self.points.data = {
+            "x": np.array([r["wall_s"] for r in pts]), "y": np.array([max(r[self.key], FLOOR) for r in pts]),
+            "solver": [r["solver"] for r in pts], "run": [run_text(r) for r in pts],
+            "steps": [str(r["steps"]) for r in pts], "error_text": [_sci(r["error"]) for r in pts],
+            "wall_text": [_sci(r["wall_s"], " s") for r in pts], "H_text": [_sci(r["H_ext_max_abs"]) for r in pts],
+            "det_text": [_sci(r["det_max_dev"]) for r in pts], "color": [method_color(r["solver"]) for r in pts],
+            "marker": ["square" if r["kind"] == "scipy" else "circle" for r in pts]}
+
+
+class DriftPlot:
+    """key against the horizon T, one line with markers per method (its fitted growth exponent in
+    the legend), and the slopes T¹ and T² through the first horizon's geometric mean, up to ten
+    times the largest value."""
+
+    def __init__(self, key, title):
+        self.key = key
+        self.fig = figure(title, "horizon T", DRIFT_KEYS[key], logx=True, logy=True, height=HEIGHT)
+        self.curves = Curves(self.fig)
+        self.dots = source()
+        self.fig.scatter("x", "y", source=self.dots, size=6, color="color")
+        self.guides = {p: source() for p in (1, 2)}
+        for p, src in self.guides.items():
+            self.fig.line("x", "y", source=src, line_color="#868e96", line_width=2,
+                          line_dash="dotted" if p == 1 else "dotdash")
+
+    def set(self, rows):
+        key = self.key
+        pts = [r for r in rows if finite(r[key]) and r[key] > 0]
+        curves = {}
+        for solver in dict.fromkeys(r["solver"] for r in rows):
+            mine = [r for r in pts if r["solver"] == solver]
+            g = wp.growth_exponent(rows, solver, key)
+            curves[f"{solver}: slope {g:.2f}" if finite(g) else f"{solver}: slope –"] = (
+                [r["T"] for r in mine], [r[key] for r in mine], False, solver)
+        self.curves.set(curves)
+        self.dots.data = {"x": np.array([r["T"] for r in pts]), "y": np.array([r[key] for r in pts]),
+                          "color": [method_color(r["solver"]) for r in pts]}
+        guides = {1: ([], []), 2: ([], [])}
+        if pts:
+            T0 = min(r["T"] for r in pts)
+            T1 = max(r["T"] for r in pts)
+            y0 = math.exp(np.mean([math.log(r[key]) for r in pts if r["T"] == T0]))
+            top = 10 * max(r[key] for r in pts)
+            for power in (1, 2):
+                end = min(T1, T0 * (top / y0) ** (1 / power))
+                guides[power] = ([T0, end], [y0, y0 * (end / T0) ** power])
+        for p, (x, y) in guides.items():
+            self.guides[p].data = {"x": np.asarray(x, float), "y": np.asarray(y, float)}
+
+
+def failed_html(rows, setting=run_text):
+    """The runs that failed (not plotted), with their messages (a message repeated by a solver's
+    later rows, as a drift's after its run stopped, once at its first row)."""
+    bad = list({(r["solver"], r["status"]): r for r in reversed(rows) if r["status"] != "ok"}.values())[::-1]
+    if not bad:
+        return ""
+    items = "".join(f"<li><b>{html.escape(r['solver'])}</b> {html.escape(setting(r))}: {html.escape(r['status'])}"
+                    "</li>" for r in bad[:8])
+    more = f"<li>… and {len(bad) - 8} more</li>" if len(bad) > 8 else ""
+    return (f"<p class='caveat'>{len(bad)} run{'s' if len(bad) > 1 else ''} failed (not plotted):</p>"
+            f"<ul class='notes'>{items}{more}</ul>")
+
+
+TARGETS_TEXT = ("<p class='doc'>Time to reach an error: the wall time at which a solver's curve crosses it "
+                "(interpolated log–log between its cheapest run below the error and the run before it); – where "
+                "it does not get there in this measurement. The ratios compare the costs at the same error: "
+                "scipy's DOP853 over cosymp's fastest method (above 1: cosymp is faster), and cosymp's fastest "
+                "symplectic method over its RK4 (below 1: structure preservation costs nothing here).</p>")
+GROWTH_TEXT = ("<p class='doc'>Growth exponent: the slope of log(error) against log(T), fitted over the horizons "
+               "before the error first reaches 0.1 (where it saturates at the orbit's size) and where it is above "
+               "ten times the reference's uncertainty, and the slope of log(max |H~|); 1 is linear growth, 2 "
+               "quadratic, 0 bounded; – with fewer than three usable horizons. Grey: the slopes T and T² for "
+               "comparison.</p>")
+WP_TEXT = ("<p>What each method costs for the accuracy it delivers, on the sidebar's scene, parameters, θ and T: "
+           "each of cosymp's methods over step sizes (refined by √2 until the error stops improving or a run "
+           "reaches {steps} steps), and scipy's adaptive <code>solve_ivp</code> over tolerances 1e-3 … 1e-12 on "
+           "the same extended ODE. Wall time: the best of repeated runs after an untimed warm-up (so no "
+           "compilation). Top, the relative error at T against the exact flow, or else a DOP853 run tighter than "
+           "any peer's; below, the largest |H~| = |H + p_t| over the run. <b>Click a point</b> of one of cosymp's "
+           "methods to open that method and step in the Orbits view.</p>")
+LONG_TEXT = ("<h4>Long horizons</h4><p>Each method at one step h, carried from T = 100 to the largest horizon: the "
+             "error at each horizon and the largest |H~| so far. Where the error grows linearly (slope 1) the "
+             "method errs mostly in phase; quadratic growth (slope 2) is the drift that structure preservation "
+             "is meant to prevent.</p>")
+
+
+def reference_html(rows):
+    """The reference the errors are measured against, and its largest uncertainty."""
+    if not rows:
+        return ""
+    unc = max((r["reference_uncertainty"] for r in rows if finite(r["reference_uncertainty"])), default=0.0)
+    return (f"<p class='doc'>Reference: {html.escape(str(rows[0]['reference']))}"
+            + (f" (relative uncertainty up to {unc:.1e}: smaller errors are not resolved)" if unc > 0 else "")
+            + ".</p>")
+
+
+def targets_table(rows):
+    """Time to reach 1e-6 and 1e-9 per solver, and the two ratios (cosymp.workprecision.targets)."""
+    if not rows:
+        return {"time to reach": []}
+    t = wp.targets(rows)
+    errors = list(t["cost"])
+    cols = {"time to reach": list(t["cost"][errors[0]])}
+    for e in errors:
+        cols[f"error {e:.0e}"] = [f"{c:.2e} s" if finite(c) else "–" for c in t["cost"][e].values()]
+    ratios = t["ratios"]
+    for label, ratio, who in (("scipy DOP853 / fastest cosymp", "dop853_over_fastest", "fastest"),
+                              ("best symplectic / rk4", "symplectic_over_rk4", "best_symplectic")):
+        cols["time to reach"].append(label)
+        for e in errors:
+            r, name = ratios[e][ratio], ratios[e][who]
+            cols[f"error {e:.0e}"].append((f"{r:.3g}×" if finite(r) else "–") + (f" ({name})" if name else ""))
+    return cols
+
+
+def growth_table(rows):
+    """The fitted growth exponents of the error and of max |H~| per method."""
+    cols = {"method": [], "order": [], "preserves": [], "error ∝ T^": [], "max |H~| ∝ T^": []}
+    for s in dict.fromkeys(r["solver"] for r in rows):
+        first = next(r for r in rows if r["solver"] == s)
+        g = [wp.growth_exponent(rows, s, key) for key in DRIFT_KEYS]
+        for k, v in zip(cols, (s, str(first["order"]), str(first["preserves"]), *[f"{x:.2f}" if finite(x) else "–"
+                                                                                 for x in g])):
+            cols[k].append(v)
+    return cols
+
+
+def run_controls(job, start_label):
+    """Start and Cancel buttons, a progress bar, the current run's label and the status line."""
+    start = pn.widgets.Button(name=start_label, button_type="primary", disabled=job.param.running)
+    start.on_click(lambda event: job.start())
+    cancel = pn.widgets.Button(name="Cancel", button_type="danger", disabled=pn.bind(lambda r: not r, job.param.running))
+    cancel.on_click(lambda event: job.cancel())
+    progress = pn.indicators.Progress(value=pn.bind(lambda p: round(100 * p), job.param.progress), max=100, width=220,
+                                      bar_color="primary", margin=(22, 10, 10, 10))
+    label = pn.bind(lambda running, text: f"<p class='doc wplabel'>{html.escape(text)}</p>" if running else "",
+                    job.param.running, job.param.label)
+    status = pn.bind(lambda st, setting: (f"<p class='doc'><b class='wpstatus'>{html.escape(st)}</b>"
+                                          + (f"<br>Shown: {html.escape(setting)}" if setting else "") + "</p>"),
+                     job.param.status, job.param.setting)
+    return (pn.Row(start, cancel, progress, note(label, width=320, sizing_mode=None, margin=(18, 5)),
+                   sizing_mode="stretch_width"),
+            note(status))
+
+
+class WorkPrecisionView(FeatureView):
+    NAME = "workprecision"
+
+    def layout(self):
+        m, lh = self.state.measure, self.state.long
+        wide = {"sizing_mode": "stretch_width"}
+        wp_row, wp_status = run_controls(m, "Start work–precision")
+        long_row, long_status = run_controls(lh, "Start long horizons")
+        self.wp_plots = [WorkPrecisionPlot(key, title, m.open_row) for key, title in
+                         (("error", "relative error at T against wall time"),
+                          ("H_ext_max_abs", "max |H~| = max |H + p_t| against wall time"))]
+        self.drift_plots = [DriftPlot(key, title) for key, title in
+                            (("error", "relative error at T, at fixed h"), ("H_ext_max_abs", "max |H~| up to T, at fixed h"))]
+        self.wp_hint = note("<p class='doc'>Nothing measured yet: press Start.</p>")
+        self.wp_failed, self.long_failed = note(""), note("")
+        self.wp_reference, self.long_reference = note(""), note("")
+        self.targets, self.growth = table(["time to reach"]), table(["method"])
+        self.wp_box = pn.Column(*[pane(p.fig) for p in self.wp_plots], self.wp_reference, note(TARGETS_TEXT),
+                                self.targets, visible=False, **wide)
+        self.long_box = pn.Column(*[pane(p.fig) for p in self.drift_plots], self.long_reference, note(GROWTH_TEXT),
+                                  self.growth, visible=False, **wide)
+        self.follow(m, "rows")
+        self.follow(lh, "rows")
+        return pn.Column(
+            note(WP_TEXT.format(steps=f"{WP_MAX_STEPS:,}")),
+            pn.widgets.MultiChoice.from_param(m.param.methods, name="Methods", **wide),
+            pn.widgets.Checkbox.from_param(m.param.peers),
+            wp_row, wp_status, self.wp_failed, self.wp_hint, self.wp_box,
+            pn.layout.Divider(),
+            note(LONG_TEXT),
+            pn.Row(pn.widgets.MultiChoice.from_param(lh.param.methods, name="Methods", **wide),
+                   pn.widgets.FloatInput.from_param(lh.param.h, format="0.[000000]", width=140),
+                   pn.widgets.Select.from_param(lh.param.T_max, width=140), **wide),
+            long_row, long_status, self.long_failed, self.long_box,
+            **wide)
+
+    def update(self):
+        m, lh = self.state.measure, self.state.long
+        self.wp_hint.visible = not m.rows
+        self.wp_box.visible = bool(m.rows)
+        self.long_box.visible = bool(lh.rows)
+        self.wp_failed.object = failed_html(m.rows)
+        self.long_failed.object = failed_html(lh.rows, lambda r: f"T = {r['T']:g}")
+        if m.rows:
+            for p in self.wp_plots:
+                p.set(m.rows)
+            self.wp_reference.object = reference_html(m.rows)
+            self.targets.value = pd.DataFrame(targets_table(m.rows))
+        if lh.rows:
+            for p in self.drift_plots:
+                p.set(lh.rows)
+            self.long_reference.object = reference_html(lh.rows)
+            self.growth.value = pd.DataFrame(growth_table(lh.rows))
+
+
+class Measurements:
+    """The tab's two measurements: work against precision, and long horizons."""
+
+    def __init__(self, study):
+        self.measure = WorkPrecision(study)
+        self.long = LongHorizons(study)
+
+    def release(self):
+        self.measure.release()
+        self.long.release()
+
+
+FEATURE = Feature("workprecision", "Work–precision", WorkPrecisionView, Measurements)

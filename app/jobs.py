@@ -1,0 +1,285 @@
+"""One background-job mechanism for every feature: computations off the event loop.
+
+A `Job` computes in a thread of its own. Requests made while it computes are merged into one
+more computation with the latest inputs (`request`); a measurement started by a button starts
+only when none is running (`start`). Each computation leases its peak memory from the server's
+budget before it starts (memory.BUDGET) and gives it back when it ends, or, for a live view's
+result (HOLD), when a newer result replaces it. It publishes its progress (fraction and label)
+and partial results (a long run's envelopes) to the event loop as they come, can be cancelled
+(at its next progress report), and after `release()` (the page was closed) it stops and nothing
+more is published: drawn for a destroyed document, a result would keep the whole session alive.
+
+Under `panel serve` the loop side runs as a task on the session's event loop (param's async
+executor); without a server the same code runs to completion before the call returns, so the
+states are testable in a plain Python session.
+"""
+import asyncio
+import dataclasses
+import math
+import threading
+import time
+
+import param
+
+from cosymp.errors import InputError, RunError
+
+from . import memory
+
+# What a computation may raise besides cosymp's own errors (InputError is a ValueError, RunError a
+# RuntimeError): each becomes a message and the session goes on.
+FAILURES = (ArithmeticError, AttributeError, LookupError, MemoryError, OSError, RuntimeError, TypeError,
+            ValueError)
+
+
+@dataclasses.dataclass(frozen=True)
+class Note:
+    """A message for the user: level is 'error', 'warning' or 'info'."""
+
+    level: str
+    text: str
+
+
+class Cancelled(Exception):
+    """Raised from a progress report to stop a computation that was cancelled."""
+
+
+def failure_text(err):
+    """A user-facing text for an exception: cosymp's own messages as they are, others with their type."""
+    return str(err) if isinstance(err, (InputError, RunError)) else f"{type(err).__name__}: {err}"
+
+
+class Run:
+    """One computation in its thread: what it reports to the loop, and whether it was cancelled."""
+
+    def __init__(self, job, inputs, lease):
+        self.inputs = inputs
+        self.lease = lease
+        self.cancelled = False
+        self.latest = (0, 1, "starting")
+        self.partial = None
+        self.result = None
+        self.error = None
+        self.started = time.perf_counter()
+        self.finished = threading.Event()
+        self._wake = None
+        self._compute = job._compute
+        self.thread = threading.Thread(target=self._main, daemon=True, name=f"cosymp-{job.KIND}")
+
+    def report(self, done, total, label=""):
+        """Progress from the computation (any thread); raises Cancelled once the run is cancelled."""
+        if self.cancelled:
+            raise Cancelled
+        self.latest = (done, total, label)
+        self._signal()
+
+    def publish(self, partial):
+        """A partial result for the loop (the latest one wins)."""
+        self.partial = partial
+        self._signal()
+
+    def _signal(self):
+        if self._wake is not None:
+            try:
+                self._wake()
+            except RuntimeError:  # the loop is closed: the server is stopping
+                pass
+
+    def _main(self):
+        try:
+            self.result = self._compute(self.inputs, self)
+        except Cancelled:
+            self.cancelled = True
+        except FAILURES as err:
+            self.error = err
+        finally:
+            if self.result is None and self.error is None and not self.cancelled:
+                self.error = RuntimeError("the computation stopped without a result (see the server's log)")
+            self.finished.set()
+            self._signal()
+
+    async def wait(self, on_progress, on_partial, interval=0.0):
+        """Start the thread and relay its reports on this loop until it ends: every progress
+        report, and the latest partial result at most once per `interval` seconds (and the last
+        one at the end)."""
+        loop = asyncio.get_running_loop()
+        woken = asyncio.Event()
+        self._wake = lambda: loop.call_soon_threadsafe(woken.set)
+        self.thread.start()
+        shown, drawn = None, -math.inf
+        while True:
+            wait = max(0.0, drawn + interval - time.perf_counter()) if self.partial is not None else None
+            try:
+                await asyncio.wait_for(woken.wait(), wait)
+            except TimeoutError:
+                pass
+            woken.clear()
+            ended = self.finished.is_set()  # read first: what was reported before the end is read below
+            if self.latest != shown:
+                shown = self.latest
+                on_progress(*shown)
+            if self.partial is not None and (ended or time.perf_counter() >= drawn + interval):
+                partial, self.partial = self.partial, None
+                on_partial(self.inputs, partial)
+                drawn = time.perf_counter()
+            if ended:
+                return
+
+
+class Job(param.Parameterized):
+    """A computation of a feature (see the module's doc). Subclasses give `_inputs()` (the
+    validated inputs, None for nothing to do, or InputError), `_bytes(inputs)` (the memory it
+    leases), `_compute(inputs, run)` (pure, in its thread; `run.report(done, total, label)` and
+    `run.publish(partial)`), `_finish(inputs, result)` and optionally `_partial(inputs, part)`
+    (on the loop), and `say(note)`."""
+
+    running = param.Boolean(default=False, doc="A computation is under way.")
+    progress = param.Number(default=0.0, bounds=(0.0, 1.0), doc="Fraction of the current computation done.")
+    label = param.String(default="", doc="What the computation is doing now.")
+    status = param.String(default="", doc="How the last computation ended.")
+
+    KIND = "computation"
+    WHAT = "this computation"
+    PREFIX = ""  # put before a message about refused inputs
+    HOLD = False  # hold the lease while the result is shown (a live view), not only while computing
+
+    def __init__(self, **params):
+        super().__init__(**params)
+        self._wanted = 0
+        self._done = 0
+        self._closed = False
+        self._held = None
+        self.run = None
+
+    # ---- requests
+
+    def request(self):
+        """Compute from the current inputs, after the computation under way (the latest wins)."""
+        self._wanted += 1
+        if not self.running and not self._closed:
+            self.running = True
+            param.parameterized.async_executor(self._drain)
+
+    def start(self):
+        """Start a computation unless one is running (a button's action)."""
+        if not self.running:
+            self.request()
+
+    def cancel(self):
+        """Stop the computation under way at its next progress report."""
+        self._wanted = self._done
+        if self.run is not None:
+            self.run.cancelled = True
+
+    def release(self):
+        """The page is gone: stop, give back the memory, publish nothing more."""
+        self._closed = True
+        self.cancel()
+        if self._held is not None:
+            self._held.release()
+
+    def refresh(self):
+        """Compute from the current inputs now, in this thread (a page's first results)."""
+        self._wanted += 1
+        target = self._wanted
+        run = self._begin()
+        if run is not None:
+            run._main()
+            self._end(run)
+        self._done = max(self._done, target)
+
+    def join(self, timeout=None):
+        """Wait for the thread of the last computation (True once it has ended)."""
+        return self.run is None or self.run.finished.wait(timeout)
+
+    # ---- the loop side
+
+    async def _drain(self):
+        try:
+            while self._done < self._wanted and not self._closed:
+                target = self._wanted
+                run = self._begin()
+                if run is not None:
+                    await run.wait(self._on_progress, self._on_partial, self.partial_interval)
+                    self._end(run)
+                self._done = max(self._done, target)
+        finally:
+            self.running = False
+
+    def _begin(self):
+        try:
+            inputs = self._inputs()
+            if inputs is None:
+                return None
+            lease = memory.BUDGET.lease(self._bytes(inputs), self.WHAT)
+        except InputError as err:
+            self.say(Note("error", self.PREFIX + str(err)))
+            self._refused()
+            return None
+        self.run = Run(self, inputs, lease)
+        self.param.update(progress=0.0, label="starting")
+        self._started(inputs)
+        return self.run
+
+    def _on_progress(self, done, total, label):
+        if not self._closed:
+            self.param.update(progress=min(1.0, done / max(total, 1)), label=label)
+
+    def _on_partial(self, inputs, part):
+        if not self._closed:
+            self._partial(inputs, part)
+
+    def _end(self, run):
+        elapsed = time.perf_counter() - run.started
+        if self._closed or run.cancelled or run.error is not None or not self.HOLD:
+            run.lease.release()
+        if self._closed:
+            return
+        if run.cancelled:
+            self._cancelled(run.inputs, elapsed)
+        elif run.error is not None:
+            text = failure_text(run.error)
+            self.status = f"failed after {elapsed:.1f} s: {text}"
+            self.say(Note("error", f"{self.KIND} failed: {text}"))
+        else:
+            if self.HOLD:
+                previous, self._held = self._held, run.lease
+                if previous is not None:
+                    previous.release()
+            self._finish(run.inputs, run.result)
+            self._done_in(run.inputs, elapsed)
+        if not self.HOLD:
+            memory.give_back()
+
+    # ---- what subclasses may adjust
+
+    partial_interval = 0.0  # partial results are drawn at most once per this many seconds
+
+    def _refused(self):
+        """Called when the inputs were refused (the message is said)."""
+
+    def _started(self, inputs):
+        """Called on the loop when a computation starts."""
+
+    def _cancelled(self, inputs, elapsed):
+        self.status = f"cancelled after {elapsed:.1f} s ({self.label})"
+
+    def _done_in(self, inputs, elapsed):
+        self.param.update(progress=1.0, label="done", status=f"done in {elapsed:.1f} s")
+
+    def _partial(self, inputs, part):
+        """A partial result, on the loop."""
+
+    def _inputs(self):
+        raise NotImplementedError
+
+    def _bytes(self, inputs):
+        raise NotImplementedError
+
+    def _compute(self, inputs, run):
+        raise NotImplementedError
+
+    def _finish(self, inputs, result):
+        raise NotImplementedError
+
+    def say(self, note):
+        raise NotImplementedError

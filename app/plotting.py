@@ -1,0 +1,262 @@
+"""Every figure of the app: built once per page with Bokeh, later changed only by sending data.
+
+A view builds its figures when it is first shown and keeps them; a new result replaces the data of
+their sources (one message per update, `push`), so nothing is re-laid-out and a user's zoom is kept
+(a scene or layout change sends fresh auto ranges instead). Figure options, colours, tick labels and
+the reductions of long series (per-bin envelopes, rasterized portraits) live here, once.
+
+Colours are the methods' own (cosymp.report.style), shared with the reports. Of two compared
+methods the first (A) is drawn solid and on top, the second (B) dashed beneath it, so both show
+where they overlap.
+"""
+import html
+import math
+from functools import cache
+from pathlib import Path
+
+import numpy as np
+import panel as pn
+from bokeh.models import (
+    ColumnDataSource,
+    CustomJSTickFormatter,
+    DataRange1d,
+    Legend,
+    LegendItem,
+    Span,
+)
+from bokeh.plotting import figure as bokeh_figure
+from panel.io.document import unlocked
+
+from cosymp.report.style import pair_colors
+from cosymp.series import envelope, thin
+
+SLOTS = ("A", "B")
+HEIGHT = 260
+POINTS = 1200  # a long series is reduced to this many points (per-bin minima and maxima)
+PATH_POINTS = 4000  # a phase portrait keeps this many points in order
+DENSE = 100_000  # a portrait of more recorded states is rasterized
+RASTER = (480, 360)
+FLOOR = 1e-17  # exact zeros of a deviation are drawn here on log axes
+TOOLS = "pan,wheel_zoom,box_zoom,reset,save"
+ASSETS = Path(__file__).resolve().parent.parent / "assets"
+
+TICKS = """
+const finite = ticks.filter(Number.isFinite);
+const lo = Math.min(...finite), hi = Math.max(...finite);
+const span = hi - lo, big = Math.max(Math.abs(lo), Math.abs(hi));
+const step = finite.length > 1 ? span / (finite.length - 1) : 0;
+function trim(s) {
+  let [m, e] = s.split("e");
+  if (m.includes(".")) m = m.replace(/0+$/, "").replace(/\\.$/, "");
+  return e === undefined ? m : m + "e" + e.replace("+", "");
+}
+function fmt(v, step) {
+  if (v === 0 || (step > 0 && Math.abs(v) < 1e-9 * step)) return "0";
+  const a = Math.abs(v);
+  if (a >= 1e-3 && a < 1e5) {
+    const decimals = step > 0 ? Math.max(0, Math.min(12, -Math.floor(Math.log10(step) + 1e-9))) : 3;
+    return trim(v.toFixed(decimals));
+  }
+  const digits = step > 0 ? Math.max(1, Math.min(15, Math.floor(Math.log10(a)) - Math.floor(Math.log10(step)) + 1)) : 3;
+  return trim(v.toExponential(digits - 1));
+}
+if (span > 0 && span < 1e-4 * big) {
+  const ref = finite[Math.floor(finite.length / 2)];
+  if (tick === ref) return fmt(ref, 0);
+  const d = tick - ref;
+  return (d > 0 ? "+" : "\u2212") + fmt(Math.abs(d), step);
+}
+return fmt(tick, step);
+"""
+"""Compact tick labels: 4e-4, 1e5, 2500; values that differ only in late digits as offsets from the
+middle tick (1, +2e-16). (A model belongs to one page: each axis gets its own formatter.)"""
+
+
+def figure(title, x_label="t", y_label="", logx=False, logy=False, height=HEIGHT, aspect=False):
+    """A figure with the app's tools, compact ticks and auto ranges that follow the data."""
+    fig = bokeh_figure(title=title, height=height, sizing_mode="stretch_width", tools=TOOLS,
+                       toolbar_location="right", x_axis_type="log" if logx else "linear",
+                       y_axis_type="log" if logy else "linear", x_axis_label=x_label, y_axis_label=y_label,
+                       x_range=DataRange1d(), y_range=DataRange1d(), match_aspect=aspect,
+                       output_backend="canvas")
+    fig.toolbar.autohide = True
+    fig.title.text_font_size = "10.5pt"
+    for axis, log in ((fig.xaxis, logx), (fig.yaxis, logy)):
+        if not log:
+            axis.formatter = CustomJSTickFormatter(code=TICKS)
+        axis.axis_label_text_font_style = "normal"
+    fig.min_border_left = 60
+    return fig
+
+
+def reset_ranges(fig):
+    """Fresh auto ranges (after a scene or layout change: a user's zoom of the old data goes)."""
+    fig.x_range = DataRange1d()
+    fig.y_range = DataRange1d()
+
+
+def source():
+    return ColumnDataSource({"x": np.empty(0), "y": np.empty(0)})
+
+
+class Pair:
+    """The two compared methods' curves (A solid on top, B dashed beneath) on one figure, with an
+    optional marker of each curve's first point (`start`) or of every point (`dots`).
+    `colors(names)` colours them by their methods, `set(data)` replaces their data."""
+
+    def __init__(self, fig, width=1.8, start=False, dots=False):
+        self.fig = fig
+        self.sources = {slot: source() for slot in SLOTS}
+        self.starts = {slot: source() for slot in SLOTS} if start else {}
+        self.lines, self.marks = {}, {}
+        for slot in reversed(SLOTS):
+            self.lines[slot] = fig.line("x", "y", source=self.sources[slot], line_width=width,
+                                        line_dash="dashed" if slot == "B" else "solid")
+            if dots:
+                self.marks[slot + "."] = fig.scatter("x", "y", source=self.sources[slot], size=4)
+            if start:
+                self.marks[slot] = fig.scatter("x", "y", source=self.starts[slot], size=9, line_color="white")
+
+    def colors(self, names):
+        for slot, color in zip(SLOTS, pair_colors(*names)):
+            self.lines[slot].glyph.line_color = color
+            for key, r in self.marks.items():
+                if key[0] == slot:
+                    r.glyph.fill_color = color
+                    if key.endswith("."):
+                        r.glyph.line_color = color
+
+    def set(self, data):
+        """data: {slot: (x, y)} (a missing slot is emptied)."""
+        for slot in SLOTS:
+            x, y = data.get(slot, (np.empty(0), np.empty(0)))
+            self.sources[slot].data = {"x": x, "y": y}
+            if self.starts:
+                self.starts[slot].data = {"x": x[:1], "y": y[:1]}
+
+
+def series(x, y, logy=False):
+    """A time series for display: the per-bin envelope of at most POINTS points; on a log axis its
+    absolute value, exact zeros at FLOOR."""
+    x, y = envelope(x, np.abs(y) if logy else y, POINTS)
+    return x, (np.maximum(y, FLOOR) if logy else y)
+
+
+def path(x, y):
+    """A parametric curve (an orbit) thinned to PATH_POINTS points in order."""
+    return thin(x, y, PATH_POINTS)
+
+
+class Raster:
+    """A dense portrait: the recorded states counted on a pixel grid and shown as an image whose
+    opacity grows with the count, one image per method."""
+
+    def __init__(self, fig):
+        self.fig = fig
+        self.sources = {slot: ColumnDataSource({"image": [], "x": [], "y": [], "dw": [], "dh": []})
+                        for slot in SLOTS}
+        for slot in reversed(SLOTS):
+            fig.image_rgba(image="image", x="x", y="y", dw="dw", dh="dh", source=self.sources[slot])
+        self.colors_ = ("#000000", "#000000")
+
+    def colors(self, labels):
+        self.colors_ = pair_colors(*labels)
+
+    def set(self, data):
+        pts = [xy for xy in data.values() if len(xy[0])]
+        if not pts:
+            for s in self.sources.values():
+                s.data = {"image": [], "x": [], "y": [], "dw": [], "dh": []}
+            return
+        xs = np.concatenate([x[np.isfinite(x)] for x, _ in pts])
+        ys = np.concatenate([y[np.isfinite(y)] for _, y in pts])
+        x0, x1 = _bounds(xs)
+        y0, y1 = _bounds(ys)
+        for slot, color in zip(SLOTS, self.colors_):
+            x, y = data.get(slot, (np.empty(0), np.empty(0)))
+            img = rasterize(x, y, (x0, x1), (y0, y1), RASTER, color)
+            self.sources[slot].data = {"image": [img], "x": [x0], "y": [y0], "dw": [x1 - x0], "dh": [y1 - y0]}
+
+
+def _bounds(v):
+    if not len(v):
+        return 0.0, 1.0
+    lo, hi = float(v.min()), float(v.max())
+    pad = 0.02 * (hi - lo) or 0.5 * max(abs(lo), 1e-300)
+    return lo - pad, hi + pad
+
+
+def rasterize(x, y, x_range, y_range, shape, color):
+    """RGBA image (uint32, rows from the bottom) of how many points fall in each pixel: the colour
+    with an opacity growing with the logarithm of the count."""
+    w, h = shape
+    ok = np.isfinite(x) & np.isfinite(y)
+    i = ((x[ok] - x_range[0]) / (x_range[1] - x_range[0]) * w).astype(np.int64).clip(0, w - 1)
+    j = ((y[ok] - y_range[0]) / (y_range[1] - y_range[0]) * h).astype(np.int64).clip(0, h - 1)
+    counts = np.bincount(j * w + i, minlength=w * h).reshape(h, w)
+    alpha = np.where(counts > 0, 80 + 175 * np.log1p(counts) / math.log1p(max(1, counts.max())), 0)
+    r, g, b = (int(color[k:k + 2], 16) for k in (1, 3, 5))
+    return (alpha.astype(np.uint32) << 24 | b << 16 | g << 8 | r).astype(np.uint32)
+
+
+def legend_outside(fig, items):
+    """A legend to the right of the plot (never over the data): items [(label, [renderers])]."""
+    legend = Legend(items=[LegendItem(label=label, renderers=rs) for label, rs in items], click_policy="hide",
+                    label_text_font_size="9pt", spacing=0, padding=4)
+    fig.add_layout(legend, "right")
+    return legend
+
+
+def vline(fig, color="#868e96"):
+    """A vertical line (a cursor) on the figure; set its `location`."""
+    span = Span(location=0.0, dimension="height", line_color=color, line_dash="dashed", line_width=1.5)
+    fig.add_layout(span)
+    return span
+
+
+def push(update):
+    """Run update() (which changes Bokeh models) so that its changes reach the page as one message:
+    under a server from the session's loop, without one directly."""
+    with unlocked():
+        update()
+
+
+def pane(fig, **kw):
+    return pn.pane.Bokeh(fig, sizing_mode="stretch_width", **kw)
+
+
+def grid(*items, ncols=2):
+    return pn.GridBox(*items, ncols=ncols, sizing_mode="stretch_width")
+
+
+@cache
+def stylesheet():
+    """The app's CSS, given to each HTML pane (Panel renders components in shadow roots)."""
+    return (ASSETS / "app.css").read_text()
+
+
+def note(obj, **kw):
+    """An HTML pane with the app's stylesheet."""
+    return pn.pane.HTML(obj, stylesheets=[stylesheet()], **{"sizing_mode": "stretch_width", **kw})
+
+
+def swatch(color, label, dashed=False):
+    style = f"border-top: 3px {'dashed' if dashed else 'solid'} {color}"
+    return f"<span class='swatch' style='{style}'></span>{html.escape(label)}"
+
+
+def table(columns, **kw):
+    """A read-only table widget of the given columns."""
+    import pandas as pd
+
+    return pn.widgets.Tabulator(pd.DataFrame(columns=columns), disabled=True, show_index=False, layout="fit_data",
+                                sizing_mode="stretch_width", **kw)
+
+
+def fmt(v, digits=3):
+    """A number as a table shows it: compact, – for a missing value."""
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "–"
+    if isinstance(v, (int, np.integer)):
+        return f"{v:,}"
+    return f"{v:.{digits}g}"

@@ -1,0 +1,445 @@
+"""The sidebar's study: scene, methods, θ, h, T and the scene's parameters, and their comparison.
+
+`Study` holds the inputs every view shares and computes the comparison of its two methods (both
+at once, in threads) whenever an input changes, through the app's one job mechanism: changes
+made while it computes are merged into one more computation with the latest inputs. Bad input
+never reaches the results: it becomes a `Note` in `message` saying what to change, the input
+goes back to its last good value and the last good results stay. The views below it (the
+controls, the scene's description, the preset links) are shared by every tab.
+"""
+import dataclasses
+import html
+import math
+from concurrent.futures import ThreadPoolExecutor
+from functools import cache
+
+import panel as pn
+import param
+
+from cosymp.errors import InputError
+from cosymp.integrate import Setup, check_step, default_stride
+from cosymp.methods import METHODS
+from cosymp.report import render
+from cosymp.report.scene import command as report_command
+from cosymp.report.scene import scene_report
+from cosymp.scenes import SCENES
+from cosymp.study import compare_until_failure as study_until_failure
+
+from .jobs import Job, Note
+from .plotting import note
+from .presets import HARD, PAPER, PRESETS, URL_NAMES, rounded
+from .warmup import FIRST_VIEW
+
+LIVE_MAX_STEPS = 2_000_000
+CLOUD_POINTS = {True: 32, False: 64}
+DELTA = 1e-4
+# A comparison peaks at <= 39 bytes per value its runs record (damped 39, charged 31, kapitza 28;
+# tracemalloc, tests/test_app_state.py checks the bound).
+BYTES_PER_RECORDED = 48
+
+
+def comparison_bytes(setups, h, T):
+    """Peak memory of comparing the setups (study.compare: 2n + 2 members with increments, and
+    their tangent maps), from the values the runs record."""
+    steps = check_step(h, T)
+    total = 0
+    for s in setups:
+        m = 2 * s.scene.ndof
+        members = m + 2
+        records = steps // default_stride(steps, members, m, increments=True) + 1
+        total += records * members * (m + 1)
+    return BYTES_PER_RECORDED * total
+
+
+@dataclasses.dataclass(frozen=True)
+class Entry:
+    """One method's run in a comparison: label, method name, Comparison (None if nothing could be
+    computed), and the failure message of a run that stopped early ('' if it reached T)."""
+
+    label: str
+    method: str
+    comparison: object
+    failure: str
+
+
+@dataclasses.dataclass(frozen=True)
+class Runs:
+    """A comparison: the scene, step and horizon, and one Entry per method."""
+
+    scene: str
+    h: float
+    T: float
+    entries: tuple
+
+    @property
+    def ok(self):
+        return [e for e in self.entries if e.comparison is not None]
+
+    @property
+    def dense(self):
+        """Whether a run recorded more states than a portrait draws as lines."""
+        from .plotting import DENSE
+
+        return any(len(e.comparison.run.t) > DENSE for e in self.ok)
+
+
+def theta_for(method, theta):
+    return theta if METHODS[method].takes_theta else None
+
+
+def compare_until_failure(setup, h, T):
+    """cosymp.study.compare_until_failure with this app's loop size and separation: the carried
+    loop has CLOUD_POINTS[linear] points (a linear map carries a polygon to a polygon: fewer suffice)."""
+    return study_until_failure(setup, h, T, delta=DELTA, cloud_points=CLOUD_POINTS[setup.scene.kernel.linear])
+
+
+def run_pair(scene, setups, h, T):
+    """Compare the setups (both at once, in threads) and return Runs."""
+    with ThreadPoolExecutor(len(setups)) as pool:
+        done = list(pool.map(lambda s: compare_until_failure(s, h, T), setups))
+    entries = []
+    for s, (comparison, failure) in zip(setups, done):
+        label = s.method.label(s.theta)
+        if any(e.label == label for e in entries):
+            label += " (2)"
+        entries.append(Entry(label, s.method.name, comparison, failure))
+    return Runs(scene, h, T, tuple(entries))
+
+
+def failure_note(runs):
+    texts = [f"{e.label}: {e.failure}" + (f"; showing data up to t = {e.comparison.run.t[-1]:.6g}"
+                                          if e.comparison is not None else "")
+             for e in runs.entries if e.failure]
+    return Note("warning", " | ".join(texts)) if texts else None
+
+
+def soft_range(p):
+    """Slider range of a numeric scene parameter: its bounds when they are narrow, else a range
+    around the default within them (any value within the bounds can still be typed)."""
+    lo, hi = p.bounds
+    if hi - lo <= 2.0:
+        return lo, hi
+    x = float(p.default)
+    s = max(2.0 * abs(x), 2.5)
+    return max(lo, x - s), min(hi, x + s)
+
+
+@cache
+def inputs_class(scene_name):
+    """A Parameterized class mirroring the scene's parameters (docs, choices, slider ranges). Its
+    numbers take any value: the scene checks them (Study says what is wrong and puts the last good
+    value back)."""
+    scene = SCENES[scene_name]
+    params = {}
+    for p in scene.params:
+        if p.choices:
+            params[p.name] = param.Selector(default=p.default, objects=list(p.choices), doc=p.doc, label=p.name)
+        elif isinstance(p.default, str):
+            params[p.name] = param.String(default=p.default, doc=p.doc, label=p.name)
+        else:
+            lo, hi = soft_range(p)
+            params[p.name] = param.Number(default=float(p.default), softbounds=(lo, hi), step=(hi - lo) / 500,
+                                          doc=p.doc, label=p.name)
+    return param.parameterized_class(f"{scene_name.title()}Inputs", params)
+
+
+class Study(Job):
+    """Scene, methods and parameters of a comparison, and its results.
+
+    `values` holds the scene parameters that differ from the scene's defaults (the URL carries
+    it); `inputs` is a Parameterized mirroring the scene's parameters, for the controls. Either
+    can be changed; the other follows. `view` names the shown tab (main.py checks it).
+    """
+
+    scene = param.Selector(default=FIRST_VIEW["scene"], objects={s.title: k for k, s in SCENES.items()},
+                           doc="The time-dependent Hamiltonian system.")
+    method = param.Selector(default=FIRST_VIEW["method"], objects={m.title: k for k, m in METHODS.items()},
+                            doc="The method under study.")
+    other = param.Selector(default=FIRST_VIEW["other"], objects={m.title: k for k, m in METHODS.items()},
+                           doc="The method it is compared with.", label="Compared with")
+    theta = param.Number(default=0.5, bounds=(0.0, 1.0), step=0.01, label="θ",
+                         doc="θ of the theta methods (θ = 1/2: midpoint; θ = 0: the paper's scheme).")
+    h = param.Number(default=SCENES[FIRST_VIEW["scene"]].h, doc="Step size h > 0.")
+    T = param.Number(default=SCENES[FIRST_VIEW["scene"]].T, doc="Horizon T of the live views.")
+    values = param.Dict(default={}, doc="Scene parameters that differ from the scene's defaults.")
+    view = param.String(default="compare", doc="The shown tab.")
+    inputs = param.Parameter(doc="The scene's parameters as a Parameterized (for the controls).")
+    results = param.ClassSelector(class_=Runs, doc="The last good comparison.")
+    message = param.ClassSelector(class_=Note, doc="The last message for the user.")
+
+    KIND = "comparison"
+    WHAT = "this comparison"
+    HOLD = True
+    INPUTS = ("scene", "method", "other", "theta", "h", "T", "values")
+
+    def __init__(self, **params):
+        super().__init__(**params)
+        scene = self.scene_obj
+        self.param.update({k: getattr(scene, k) for k in ("h", "T") if k not in params})
+        self._nested = False
+        self._syncing = False
+        try:
+            self.inputs = self._make_inputs()
+        except InputError as err:
+            self.say(Note("error", str(err)))
+            self.values = {}
+            self.inputs = self._make_inputs()
+        self._good = None
+        self.param.watch(self._on_change, list(self.INPUTS))
+        self.refresh()
+        if self.results is None:  # refused (a link's h or T, say): the scene's own run instead
+            self._set({"h": scene.h, "T": scene.T, "values": {}, "method": FIRST_VIEW["method"],
+                       "other": FIRST_VIEW["other"]})
+            self.inputs = self._make_inputs()
+            self.refresh()
+
+    def say(self, note):
+        """Post a message (a repeated message is posted again)."""
+        with param.parameterized.discard_events(self):
+            self.message = note
+        self.param.trigger("message")
+
+    @property
+    def scene_obj(self):
+        return SCENES[self.scene]
+
+    def state(self):
+        """The inputs as the URL holds them."""
+        return {k: rounded(getattr(self, k)) for k in URL_NAMES}
+
+    def setups(self):
+        """The two checked setups, or InputError saying what to change."""
+        scene = self.scene_obj
+        return tuple(Setup.make(scene, m, self.values, theta_for(m, self.theta)) for m in (self.method, self.other))
+
+    def check_horizon(self):
+        steps = check_step(self.h, self.T)
+        if steps > LIVE_MAX_STEPS:
+            raise InputError(f"T/h = {steps:.3g} steps is beyond the live views' limit of "
+                             f"{LIVE_MAX_STEPS:.0e}: increase h, shorten T, or use the Long run view")
+        return steps
+
+    def _make_inputs(self):
+        inputs = inputs_class(self.scene)(**self.scene_obj.values(self.values))
+        inputs.param.watch(self._on_inputs, [p.name for p in self.scene_obj.params])
+        return inputs
+
+    def _on_inputs(self, *events):
+        if self._syncing:
+            return
+        defaults = {p.name: p.default for p in self.scene_obj.params}
+        current = {name: getattr(self.inputs, name) for name in defaults}
+        self.values = {k: v for k, v in current.items() if v != defaults[k]}
+
+    def _on_change(self, *events):
+        if self._nested:
+            return
+        changed = {e.name for e in events}
+        scene = self.scene_obj
+        if "scene" in changed:
+            updates = {k: getattr(scene, k) for k in ("h", "T") if k not in changed}
+            if "values" not in changed:
+                updates["values"] = {}
+            for name, fallback in (("method", "midpoint"), ("other", "rk4")):
+                reason = METHODS[getattr(self, name)].refusal(scene)
+                if reason:
+                    updates[name] = fallback
+                    self.say(Note("info", f"{reason}; switched to {fallback}"))
+            try:
+                scene.values(updates.get("values", self.values))
+            except InputError as err:
+                self.say(Note("error", str(err)))
+                updates["values"] = {}
+            self._set(updates)
+            self.inputs = self._make_inputs()
+        elif "values" in changed:
+            try:
+                vals = scene.values(self.values)
+            except InputError as err:
+                self.say(Note("error", str(err)))
+                self._restore()
+                return
+            self._syncing = True
+            try:
+                self.inputs.param.update(**vals)
+            finally:
+                self._syncing = False
+        self.request()
+
+    def _set(self, updates):
+        self._nested = True
+        try:
+            self.param.update(**updates)
+        finally:
+            self._nested = False
+
+    def _restore(self):
+        """Put the inputs of the last good comparison back (after bad input was refused)."""
+        if self._good is None:
+            return
+        self._set({k: v for k, v in self._good.items() if getattr(self, k) != v})
+        if self.inputs is not None and self.scene == self._good["scene"]:
+            self._syncing = True
+            try:
+                self.inputs.param.update(**self.scene_obj.values(self.values))
+            finally:
+                self._syncing = False
+
+    def _refused(self):
+        self._restore()
+
+    def _inputs(self):
+        setups = self.setups()
+        self.check_horizon()
+        return self.scene, setups, float(self.h), float(self.T), {k: getattr(self, k) for k in self.INPUTS}
+
+    def _bytes(self, inputs):
+        return comparison_bytes(*inputs[1:4])
+
+    def _compute(self, inputs, run):
+        scene, setups, h, T, _ = inputs
+        return run_pair(scene, setups, h, T)
+
+    def _finish(self, inputs, runs):
+        self._good = inputs[4]
+        self.results = runs
+        note_ = failure_note(runs)
+        if note_:
+            self.say(note_)
+
+    def _done_in(self, inputs, elapsed):
+        """A live comparison keeps no status line."""
+
+
+def study_report(study):
+    """The HTML report of the study's comparison (the views' own runs when they match the
+    inputs, else computed afresh), or InputError saying what to change."""
+    setups = study.setups()
+    study.check_horizon()
+    h, T = float(study.h), float(study.T)
+    runs = study.results
+    computed = None
+    if runs is not None and (runs.scene, runs.h, runs.T) == (study.scene, h, T) and all(
+            e.comparison is None or e.comparison.setup.values == s.values for e, s in zip(runs.entries, setups)) \
+            and [e.method for e in runs.entries] == [s.method.name for s in setups]:
+        computed = [(e.comparison, e.failure) for e in runs.entries]
+    report = scene_report(setups, h, T, report_command(setups, h, T, "cosymp-report.html"), computed=computed)
+    return render(report)
+
+
+# ---------------------------------------------------------------- the sidebar and the header
+
+
+class Controls(pn.viewable.Viewer):
+    """Scene, methods, θ, h, T and the scene's own parameters (generated from its metadata)."""
+
+    study = param.ClassSelector(class_=Study)
+
+    def __panel__(self):
+        s = self.study
+        takes_theta = pn.bind(lambda m, o: METHODS[m].takes_theta or METHODS[o].takes_theta,
+                              s.param.method, s.param.other)
+        wide = {"sizing_mode": "stretch_width"}
+        params = pn.Column(scene_widgets(s.inputs), **wide, margin=0)
+        s.param.watch(lambda e: params.__setitem__(0, scene_widgets(e.new)), "inputs")
+        return pn.Column(
+            pn.widgets.Select.from_param(s.param.scene, name="Scene", **wide),
+            pn.widgets.Select.from_param(s.param.method, name="Method", **wide),
+            pn.widgets.FloatSlider.from_param(s.param.theta, visible=takes_theta, **wide),
+            pn.widgets.Select.from_param(s.param.other, **wide),
+            pn.Row(pn.widgets.FloatInput.from_param(s.param.h, name="Step h", format="0.[000000]", **wide),
+                   pn.widgets.FloatInput.from_param(s.param.T, name="Horizon T", **wide), **wide),
+            note("<h4>Scene parameters</h4>", margin=(10, 5, 0, 5)),
+            params,
+            **wide,
+        )
+
+
+def scene_widgets(inputs):
+    """Widgets for a scene-inputs object: a slider with a text box for each number (the slider
+    spans a range around the default; any value within the bounds can be typed), a select for
+    choices, a text input (applied on Enter) for beta(t)."""
+    widgets = []
+    for name in (n for n in inputs.param if n != "name"):
+        p = inputs.param[name]
+        if isinstance(p, param.Selector):
+            w = pn.widgets.Select.from_param(p, description=p.doc, sizing_mode="stretch_width")
+        elif isinstance(p, param.String):
+            label = f"{name}(t): 'paper', 'constant' or an expression of t"
+            w = pn.widgets.TextInput.from_param(p, name=label, description=p.doc, sizing_mode="stretch_width",
+                                                placeholder="e.g. 0.05*(1 + tanh(t)), then Enter")
+        else:
+            w = number_control(inputs, name)
+        widgets.append(w)
+    return pn.Column(*widgets, sizing_mode="stretch_width", margin=0)
+
+
+def number_control(inputs, name):
+    """A slider over the parameter's soft range and a box that takes any value; the slider widens
+    to a typed value outside its range.
+
+    Not Panel's EditableFloatSlider: in Panel 1.9 its JavaScript callback sits in a global
+    registry whose entry refers back to the widget, so every one stays alive, and with it the
+    inputs it shows, the Study watching them and the closed session's results."""
+    p = inputs.param[name]
+    lo, hi = p.softbounds
+    value = getattr(inputs, name)
+    slider = pn.widgets.FloatSlider(label=p.label, start=min(lo, value), end=max(hi, value), step=p.step,
+                                    value=value, format="0.[00000]", sizing_mode="stretch_width")
+    box = pn.widgets.FloatInput.from_param(p, name="", format="0.[00000]", width=100, align="end",
+                                           description=p.doc)
+
+    def show(event):
+        v = getattr(inputs, name)  # not event.new: a refused value has been put back meanwhile
+        if math.isfinite(v) and v != slider.value:
+            slider.param.update(start=min(slider.start, v), end=max(slider.end, v), value=v)
+
+    def take(event):
+        if event.new != getattr(inputs, name):
+            setattr(inputs, name, event.new)
+
+    inputs.param.watch(show, name)
+    slider.param.watch(take, "value")
+    return pn.Row(slider, box, name=name, sizing_mode="stretch_width", margin=0)
+
+
+class SceneInfo(pn.viewable.Viewer):
+    """The scene's title, summary, equations, what to look for, and its notes."""
+
+    study = param.ClassSelector(class_=Study)
+
+    def __panel__(self):
+        box = pn.Column(scene_info(self.study.scene), sizing_mode="stretch_width")
+        self.study.param.watch(lambda e: box.__setitem__(0, scene_info(e.new)), "scene")
+        return box
+
+
+def scene_info(name):
+    s = SCENES[name]
+    notes = "".join(f"<li>{html.escape(n)}</li>" for n in s.notes)
+    return pn.Column(
+        note(f"<h2>{html.escape(s.title)}</h2><p>{html.escape(s.summary)}</p>", margin=(0, 10)),
+        pn.FlexBox(*[pn.pane.LaTeX(f"${e}$", renderer="katex", styles={"font-size": "1.05em"})
+                     for e in s.equations], gap="1.5em", sizing_mode="stretch_width"),
+        note(f"<p class='lookfor'><b>Look for:</b> {html.escape(s.look_for)}</p>"
+             + (f"<ul class='notes'>{notes}</ul>" if notes else ""), margin=(0, 10)),
+        sizing_mode="stretch_width",
+    )
+
+
+class PresetLinks(pn.viewable.Viewer):
+    """Links that open the app on each paper figure's parameters, and on the hard cases (each
+    with its sentence on what to see)."""
+
+    def __panel__(self):
+        groups = []
+        for group in (PAPER, HARD):
+            items = "".join(f"<li><a href='{html.escape(p.query())}' title='{html.escape(p.doc)}'>"
+                            f"{html.escape(p.name)}</a>"
+                            + (f"<br><small>{html.escape(p.doc)}</small>" if group == HARD else "") + "</li>"
+                            for p in PRESETS if p.group == group)
+            body = f"<ul class='presets'>{items}</ul>"
+            groups.append(f"<h4>{group}</h4>{body}" if group == PAPER else
+                          f"<details class='presets'><summary><b>{group}</b> (what each shows)</summary>{body}</details>")
+        return note("".join(groups))
+
