@@ -22,6 +22,18 @@ from .warmup import prepare
 
 ASSETS = Path(__file__).resolve().parent.parent / "assets"
 NOTIFY_MS = {"error": 8000, "warning": 6000, "info": 4000}
+COPY_LINK_JS = """
+const label = 'Copy link to this view';
+const done = (text) => { source.label = text; setTimeout(() => { source.label = label; }, 2500); };
+if (!(navigator.clipboard && window.isSecureContext)) {
+  done('Copy failed: use the address bar');
+} else {
+  const waited = setTimeout(() => done('Not allowed to copy: use the address bar'), 1000);
+  navigator.clipboard.writeText(window.location.href).then(
+    () => { clearTimeout(waited); done('Link copied ✓'); },
+    () => { clearTimeout(waited); done('Copy failed: use the address bar'); });
+}
+"""
 
 
 class App(param.Parameterized):
@@ -138,8 +150,7 @@ class App(param.Parameterized):
 
     def template(self):
         share = pn.widgets.Button(name="Copy link to this view", sizing_mode="stretch_width")
-        share.js_on_click(code="navigator.clipboard.writeText(window.location.href);"
-                               "cb_obj.label = 'Link copied';")
+        share.js_on_click(code=COPY_LINK_JS)
         busy = self.study.param.running
         spinner = pn.indicators.LoadingSpinner(value=busy, visible=busy, size=24)
         download = pn.widgets.FileDownload(callback=self._report, filename="cosymp-report.html",
@@ -155,4 +166,5 @@ class App(param.Parameterized):
 
 
 pn.extension("katex", "tabulator", notifications=True, design="bootstrap")
+pn.state.notifications.position = "bottom-left"  # over the sidebar's lower part, not over the plots
 App().template().servable(title="cosymp")

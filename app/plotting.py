@@ -45,31 +45,46 @@ const finite = ticks.filter(Number.isFinite);
 const lo = Math.min(...finite), hi = Math.max(...finite);
 const span = hi - lo, big = Math.max(Math.abs(lo), Math.abs(hi));
 const step = finite.length > 1 ? span / (finite.length - 1) : 0;
+const nonzero = finite.filter((v) => Math.abs(v) > 1e-9 * step).map(Math.abs);
+const exp = big >= 1e5 || (nonzero.length > 0 && Math.min(...nonzero) < 1e-3);  // one form per axis
+const alone = (a) => a >= 1e5 || a < 1e-3;
+function places(step) {  // the decimals that write every multiple of step exactly
+  for (let d = 0; d < 12; d++) if (Math.abs(step * 10 ** d - Math.round(step * 10 ** d)) < 1e-6 * step * 10 ** d) return d;
+  return 12;
+}
 function trim(s) {
   let [m, e] = s.split("e");
   if (m.includes(".")) m = m.replace(/0+$/, "").replace(/\\.$/, "");
   return e === undefined ? m : m + "e" + e.replace("+", "");
 }
-function fmt(v, step) {
+function fmt(v, step, exp) {
   if (v === 0 || (step > 0 && Math.abs(v) < 1e-9 * step)) return "0";
   const a = Math.abs(v);
-  if (a >= 1e-3 && a < 1e5) {
-    const decimals = step > 0 ? Math.max(0, Math.min(12, -Math.floor(Math.log10(step) + 1e-9))) : 3;
-    return trim(v.toFixed(decimals));
+  if (!exp) {
+    return trim(v.toFixed(step > 0 ? places(step) : 3));
   }
-  const digits = step > 0 ? Math.max(1, Math.min(15, Math.floor(Math.log10(a)) - Math.floor(Math.log10(step)) + 1)) : 3;
+  const mantissa = step > 0 ? Math.min(2, places(step / 10 ** Math.floor(Math.log10(step)))) : 2;
+  const digits = step > 0 ? Math.max(1, Math.min(15, Math.floor(Math.log10(a)) - Math.floor(Math.log10(step)) + 1 + mantissa)) : 3;
   return trim(v.toExponential(digits - 1));
 }
 if (span > 0 && span < 1e-4 * big) {
   const ref = finite[Math.floor(finite.length / 2)];
-  if (tick === ref) return fmt(ref, 0);
-  const d = tick - ref;
-  return (d > 0 ? "+" : "\u2212") + fmt(Math.abs(d), step);
+  if (tick === ref) return trim(alone(Math.abs(ref)) ? ref.toExponential(11) : ref.toPrecision(12));
+  const d = Math.abs(tick - ref);
+  return (tick > ref ? "+" : "\\u2212") + fmt(d, step, alone(d));
 }
-return fmt(tick, step);
+return fmt(tick, step, exp);
 """
 """Compact tick labels: 4e-4, 1e5, 2500; values that differ only in late digits as offsets from the
 middle tick (1, +2e-16). (A model belongs to one page: each axis gets its own formatter.)"""
+LOG_TICKS = r"""
+if (!(tick > 0)) return "";
+if (tick >= 1e-3 && tick < 1e5) return String(parseFloat(tick.toPrecision(3)));
+let [m, e] = tick.toExponential(2).split("e");
+if (m.includes(".")) m = m.replace(/0+$/, "").replace(/\.$/, "");
+return m + "e" + e.replace("+", "");
+"""
+"""Log-axis tick labels: 1e-5, 2e-17, 0.01, 100."""
 
 
 def figure(title, x_label="t", y_label="", logx=False, logy=False, height=HEIGHT, aspect=False):
@@ -82,8 +97,7 @@ def figure(title, x_label="t", y_label="", logx=False, logy=False, height=HEIGHT
     fig.toolbar.autohide = True
     fig.title.text_font_size = "10.5pt"
     for axis, log in ((fig.xaxis, logx), (fig.yaxis, logy)):
-        if not log:
-            axis.formatter = CustomJSTickFormatter(code=TICKS)
+        axis.formatter = CustomJSTickFormatter(code=LOG_TICKS if log else TICKS)
         axis.axis_label_text_font_style = "normal"
     fig.min_border_left = 60
     return fig
@@ -135,16 +149,71 @@ class Pair:
                 self.starts[slot].data = {"x": x[:1], "y": y[:1]}
 
 
+def finite(y):
+    """y with its infinities as NaN (a gap in the curve; an infinity would break the axis' range)."""
+    y = np.asarray(y, float)
+    return np.where(np.isinf(y), np.nan, y)
+
+
+DECADES = 1e4  # curves this many times apart in size are drawn as |y| on a log axis
+
+
+class Curves:
+    """Both methods' series over time: on a linear axis, or as |y| on a log axis when the curves are
+    decades apart (one method blowing up, or a log quantity). `show(data, names)` takes the
+    unreduced {slot: (t, y)} and the methods' names, and draws the series (envelopes)."""
+
+    def __init__(self, title, x_label, y_label, log=False):
+        self.always_log = log
+        self.linear = None if log else Pair(figure(title, x_label, y_label))
+        self.log = Pair(figure(title if log else f"{title}: |·| on a log axis (decades apart)", x_label,
+                               y_label if log else f"|{y_label}|", logy=True))
+        self.active = self.log if log else self.linear
+        self.panel = pn.Column(pane(self.active.fig), sizing_mode="stretch_width", margin=0)
+
+    @property
+    def sources(self):
+        return self.active.sources
+
+    @property
+    def figures(self):
+        return [p.fig for p in (self.linear, self.log) if p is not None]
+
+    def show(self, data, names):
+        sizes = [np.nanmax(np.abs(finite(y))) for _, y in data.values() if np.any(np.isfinite(y))]
+        typical = [np.nanmedian(np.abs(finite(y))) for _, y in data.values() if np.any(np.isfinite(y))]
+        apart = bool(sizes) and min(typical) > 0 and max(sizes) > DECADES * min(typical)
+        active = self.log if self.always_log or apart else self.linear
+        if active is not self.active:
+            self.active = active
+            self.panel.objects = [pane(active.fig)]
+        active.colors(names)
+        active.set({slot: series(t, y, logy=active is self.log) for slot, (t, y) in data.items()})
+
+
 def series(x, y, logy=False):
     """A time series for display: the per-bin envelope of at most POINTS points; on a log axis its
     absolute value, exact zeros at FLOOR."""
-    x, y = envelope(x, np.abs(y) if logy else y, POINTS)
+    x, y = envelope(x, finite(np.abs(y) if logy else y), POINTS)
     return x, (np.maximum(y, FLOOR) if logy else y)
+
+
+def peaks(x, y):
+    """The maximum of each of at most POINTS bins of a deviation, at FLOOR where it is exactly zero:
+    a bound drawn as a clean band, not the noise of round-off."""
+    y = np.maximum(finite(y), FLOOR)
+    if len(y) <= POINTS:
+        return np.asarray(x, float), y
+    width = math.ceil(len(y) / POINTS)
+    padded = np.full(math.ceil(len(y) / width) * width, np.nan)
+    padded[:len(y)] = y
+    with np.errstate(invalid="ignore"):
+        return np.asarray(x, float)[::width], np.nanmax(padded.reshape(-1, width), axis=1)
 
 
 def path(x, y):
     """A parametric curve (an orbit) thinned to PATH_POINTS points in order."""
-    return thin(x, y, PATH_POINTS)
+    return thin(finite(x), finite(y), PATH_POINTS)
 
 
 class Raster:
@@ -216,7 +285,12 @@ def vline(fig, color="#868e96"):
 
 def push(update):
     """Run update() (which changes Bokeh models) so that its changes reach the page as one message:
-    under a server from the session's loop, without one directly."""
+    under a server from the session's loop (before the page has loaded, in a callback that holds
+    the document's lock), without one directly."""
+    doc = pn.state.curdoc
+    if doc is not None and getattr(doc, "session_context", None) is not None and not pn.state.loaded:
+        doc.add_next_tick_callback(update)
+        return
     with unlocked():
         update()
 

@@ -159,9 +159,9 @@ class Study(Job):
                            doc="The method it is compared with.", label="Compared with")
     theta = param.Number(default=0.5, bounds=(0.0, 1.0), step=0.01, label="θ",
                          doc="θ of the theta methods (θ = 1/2: midpoint; θ = 0: the paper's scheme).")
-    h = param.Number(default=SCENES[FIRST_VIEW["scene"]].h, doc="Step size h > 0.")
-    T = param.Number(default=SCENES[FIRST_VIEW["scene"]].T, doc="Horizon T of the live views.")
-    values = param.Dict(default={}, doc="Scene parameters that differ from the scene's defaults.")
+    h = param.Number(default=FIRST_VIEW["h"], doc="Step size h > 0.")
+    T = param.Number(default=FIRST_VIEW["T"], doc="Horizon T of the live views.")
+    values = param.Dict(default=dict(FIRST_VIEW["values"]), doc="Scene parameters that differ from the scene's defaults.")
     view = param.String(default="compare", doc="The shown tab.")
     inputs = param.Parameter(doc="The scene's parameters as a Parameterized (for the controls).")
     results = param.ClassSelector(class_=Runs, doc="The last good comparison.")
@@ -175,7 +175,11 @@ class Study(Job):
     def __init__(self, **params):
         super().__init__(**params)
         scene = self.scene_obj
-        self.param.update({k: getattr(scene, k) for k in ("h", "T") if k not in params})
+        chosen = "scene" in params  # a chosen scene opens on its own h, T and values, the first view on its own
+        if chosen:
+            self.param.update({k: getattr(scene, k) for k in ("h", "T") if k not in params})
+            if "values" not in params:
+                self.values = {}
         self._nested = False
         self._syncing = False
         try:
@@ -188,7 +192,8 @@ class Study(Job):
         self.param.watch(self._on_change, list(self.INPUTS))
         self.refresh()
         if self.results is None:  # refused (a link's h or T, say): the scene's own run instead
-            self._set({"h": scene.h, "T": scene.T, "values": {}, "method": FIRST_VIEW["method"],
+            h, T, values = (scene.h, scene.T, {}) if chosen else (FIRST_VIEW["h"], FIRST_VIEW["T"], FIRST_VIEW["values"])
+            self._set({"h": h, "T": T, "values": dict(values), "method": FIRST_VIEW["method"],
                        "other": FIRST_VIEW["other"]})
             self.inputs = self._make_inputs()
             self.refresh()
@@ -386,8 +391,10 @@ def number_control(inputs, name):
     value = getattr(inputs, name)
     slider = pn.widgets.FloatSlider(label=p.label, start=min(lo, value), end=max(hi, value), step=p.step,
                                     value=value, format="0.[00000]", sizing_mode="stretch_width")
+    # No start or end on the box (Panel would take the slider's range): a typed value outside the
+    # scene's bounds must reach the study, which says what is wrong and puts the last good value back.
     box = pn.widgets.FloatInput.from_param(p, name="", format="0.[00000]", width=100, align="end",
-                                           description=p.doc)
+                                           description=p.doc, start=None, end=None)
 
     def show(event):
         v = getattr(inputs, name)  # not event.new: a refused value has been put back meanwhile

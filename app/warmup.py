@@ -16,8 +16,10 @@ import importlib
 import time
 
 RASTER_COLUMNS = ("x", "y")  # the column names of every rasterized portrait (views.raster_dims)
-FIRST_VIEW = {"scene": "damped", "method": "midpoint", "other": "rk4"}
-"""What the app shows first (state.Study's defaults): its kernels are compiled first."""
+FIRST_VIEW = {"scene": "modulated", "method": "midpoint", "other": "rk4", "h": 0.2, "T": 2000.0,
+              "values": {"eps": 0.2, "alpha": 0.05}}
+"""What the app shows first (study.Study's defaults; presets.PRESETS[0]): RK4's |H + p_t| starts below
+the symplectic method's bounded band, drifts, and passes it. Its kernels are compiled first."""
 
 
 def first_keys():

@@ -50,10 +50,11 @@ Actions: a fresh page (navigation to first plot drawn / settled), the scene chan
 and back to damped, the method changed (midpoint -> gauss4 -> symplectic-euler -> midpoint), the
 gamma slider dragged (first move to first change, last move to settled), θ moved by 20 ArrowRight
 presses with the Lifted theta-method (first press to both), the first visit of each tab on a
-fresh page, and a load: ten pages each move gamma by one key press every 2 s (closed loop: a move
-waits until the page's previous move settled, so each latency belongs to one move) for 60 s while
-an eleventh page runs a long run to T = 3e6; its progress bar (a <progress>) is read every 5 s and
-its counted events are kept (the run redraws its plots as chunks arrive).
+fresh page, and a load: ten pages each move gamma by one key press at most every 2 s (closed loop:
+a move waits until the page's previous move settled, so each latency belongs to one move and a
+slow server gets fewer moves) for 60 s while an eleventh page runs a long run to T = 3e6; its
+progress bar (a <progress>) is read every 5 s and its counted events are kept (the run redraws its
+plots as chunks arrive).
 
 Widgets are found by their visible label text, not by the app's classes: the nearest <select> or
 role=slider element to a visible element whose whole text is the label (or "label: value"), the
@@ -91,7 +92,7 @@ QUIET_MS = 600               # quiet before an input; a longer gap within an upd
 SETTLE_TIMEOUT_MS = 20_000   # from the input
 QUIET_TIMEOUT_MS = 60_000    # waiting for a quiet page before an input
 CONFIRM_MS = 2_000           # settled: no counted event for this long after the last one's paint
-HOT_MS = 5_000               # drawn plots are looked for every frame this long after an input or event
+HOT_MS = 5_000               # new plots are looked for every frame this long after models came
 
 SCENE_HOME = "damped"
 # Scene -> text its option shows (lower case; the key itself matches an option value or text too).
@@ -109,6 +110,7 @@ LOAD_PAGES = 10
 LOAD_SECONDS = 60
 LOAD_INTERVAL_S = 2.0
 LOAD_MOVE_TIMEOUT_MS = 60_000
+LOAD_POLL_S = 0.25           # how often a page with a move under way is asked whether it settled
 LOAD_PROGRESS_EVERY_S = 5.0
 LONG_RECENT_S = 10           # the long run counts as progressing if its page got plot events this recently
 LONG_QUERY = {"view": "long", "T_long": "3e6", "p": json.dumps({"gamma": 0.0002}, separators=(",", ":"))}
@@ -117,16 +119,13 @@ LONG_QUERY = {"view": "long", "T_long": "3e6", "p": json.dumps({"gamma": 0.0002}
 INSTRUMENT_JS = """(() => {
   if (window.__latency) return;
   const QUIET = %(quiet)d, CONFIRM = %(confirm)d, HOT = %(hot)d;
+  const VISIBLE = {visibilityProperty: true, opacityProperty: true};
   const PART_NAMES = ["DataSource", "CDSView", "Plot", "Renderer", "Glyph", "Range", "Scale", "Ticker",
                       "TickFormatter", "ColorMapper"];
-  const L = window.__latency = {inputs: [], events: [], lastEvent: -Infinity, lastInput: -Infinity,
+  const L = window.__latency = {inputs: [], events: [], lastEvent: -Infinity, lastGraph: -Infinity,
                                 before: {}};
   for (const type of ["keydown", "pointerdown", "pointermove", "pointerup", "input"])
-    window.addEventListener(type, () => {
-      const t = performance.now();
-      L.inputs.push([type, t]);
-      L.lastInput = t;
-    }, true);
+    window.addEventListener(type, () => L.inputs.push([type, performance.now()]), true);
 
   // Counted events: [time, what, paint time (the next animation frame), changes a plot itself].
   const record = (what, plot, painted) => {
@@ -146,14 +145,18 @@ INSTRUMENT_JS = """(() => {
     if (e.sync !== false) return;   // made in the browser, not applied from the server
     if (["ColumnsStreamed", "ColumnsPatched", "ColumnDataChanged"].includes(e.kind))
       record(e.kind, true, false);
-    else if (["RootAdded", "RootRemoved"].includes(e.kind)) record(e.kind, false, false);
-    else if (e.kind === "ModelChanged") {
+    else if (["RootAdded", "RootRemoved"].includes(e.kind)) {
+      record(e.kind, false, false);
+      L.lastGraph = L.lastEvent;
+    } else if (e.kind === "ModelChanged") {
       const part = parts.some((c) => e.model instanceof c), graph = hasModels(e.value, 0);
       if (part || graph) record((graph ? "models:" : "") + e.model.type + "." + e.attr, part, false);
+      if (graph) L.lastGraph = L.lastEvent;
     }
   };
+  // Shown: laid out, and not hidden by display, visibility (inactive Bokeh tabs) or opacity.
   const shown = (el) => {
-    if (!el.isConnected || !el.checkVisibility()) return false;
+    if (!el.isConnected || !el.checkVisibility(VISIBLE)) return false;
     const r = el.getBoundingClientRect();
     return r.width > 0 && r.height > 0;
   };
@@ -166,8 +169,9 @@ INSTRUMENT_JS = """(() => {
                          && ![...Bokeh.index].every((v) => v.has_finished());
   const hooked = new WeakSet(), drawn = new WeakSet();
   let anyDrawn = false;
-  // Every animation frame while the page is busy (no plot yet, views building, or within HOT ms of
-  // an input or counted event), else every 50 ms: hook new documents, note newly drawn plots.
+  // Hook new documents; note newly drawn plots every animation frame while new plot views may come
+  // (no plot drawn yet, HOT ms after models were added or replaced, or while views are building
+  // after that), else look for new documents every 50 ms.
   const tick = () => {
     const B = window.Bokeh;
     let hot = !anyDrawn;
@@ -177,14 +181,19 @@ INSTRUMENT_JS = """(() => {
         hooked.add(doc);
         doc.on_change(onChange, false);
         record("document", false, false);
+        L.lastGraph = L.lastEvent;
       }
-      hot = hot || performance.now() - Math.max(L.lastEvent, L.lastInput) < HOT || building();
-      if (hot)
-        for (const v of plotViews()) if (!drawn.has(v) && v.has_finished()) {
-          drawn.add(v);
-          anyDrawn = true;
-          record("drawn:" + v.model.type, true, true);
-        }
+      const sinceGraph = performance.now() - L.lastGraph;
+      hot = hot || sinceGraph < HOT || (sinceGraph < 60_000 && building());
+      if (hot) {
+        const Plot = B.Models.get("Plot");
+        for (const v of B.index.all_views())
+          if (v.model instanceof Plot && !drawn.has(v) && v.has_finished() && shown(v.el)) {
+            drawn.add(v);
+            anyDrawn = true;
+            record("drawn:" + v.model.type, true, true);
+          }
+      }
     }
     if (hot) requestAnimationFrame(tick);
     else setTimeout(tick, 50);
@@ -297,7 +306,7 @@ NEAREST_JS = """([pattern, selector]) => {
   };
   walk(document);
   const shown = (el) => {
-    if (!el.checkVisibility()) return false;
+    if (!el.checkVisibility({visibilityProperty: true, opacityProperty: true})) return false;
     const r = el.getBoundingClientRect();
     return r.width > 0 && r.height > 0;
   };
@@ -333,7 +342,8 @@ OPTION_TEXTS_JS = "(sel) => [...sel.options].map((o) => o.text.trim())"
 PROGRESS_JS = """() => {
   const walk = (root) => {
     for (const el of root.querySelectorAll("*")) {
-      if (el.tagName === "PROGRESS" && el.checkVisibility()) return el;
+      if (el.tagName === "PROGRESS" && el.checkVisibility({visibilityProperty: true, opacityProperty: true}))
+        return el;
       const inner = el.shadowRoot && walk(el.shadowRoot);
       if (inner) return inner;
     }
@@ -578,14 +588,17 @@ def run_tabs(browser, url, repeats, record):
 class Mover:
     """A load page: one gamma key press at a time, the next when the last settled and 2 s passed."""
 
-    def __init__(self, context, page, start_at):
-        self.context, self.page, self.next_at = context, page, start_at
+    def __init__(self, page):
+        self.page = page
         self.handle = control(page, "gamma", "[role=slider]")
-        self.pending = None       # in-page time of the move under way
+        self.next_at = self.next_poll = 0.0   # time.monotonic() of the next move, of the next look
+        self.pending = None                   # in-page time of the move under way
         self.moves = []
 
     def step(self, now, moving):
         """Start a move if it is time, or collect the one under way; True while one is under way."""
+        if self.pending is not None and now < self.next_poll:
+            return True
         if self.pending is None:
             if moving and now >= self.next_at:
                 key = "ArrowRight" if len(self.moves) % 2 == 0 else "ArrowLeft"   # gamma stays near 0.2
@@ -601,6 +614,7 @@ class Mover:
         s = self.page.evaluate("([t, to]) => __latency.status(t, to, false, true)",
                                [self.pending, LOAD_MOVE_TIMEOUT_MS])
         if s["state"] == "pending":
+            self.next_poll = now + LOAD_POLL_S
             return True
         self.moves.append(timings(s, self.pending, self.pending))
         self.pending = None
@@ -615,7 +629,7 @@ def run_load(browser, url):
         for _ in range(LOAD_PAGES):
             context, page, _ = open_page(browser, url)
             contexts.append(context)
-            movers.append(Mover(context, page, 0.0))
+            movers.append(Mover(page))
         long_context, long_page, _ = open_page(browser, url + "?" + urllib.parse.urlencode(LONG_QUERY))
         contexts.append(long_context)
         long_page.get_by_role("button", name="Start long run").click()

@@ -176,9 +176,20 @@ def simulate(setup, h, T, z0=None, stride=None, increments=False, t0=0.0, pt0=No
                        dZrec[:kept] if increments else None, done, wall)
     if status != OK:
         t_fail = t0 + done * h
-        traj.failure = failure_message(status, round(t0 / h) + done, t_fail, h)
+        traj.failure = failure_message(status, round(t0 / h) + done, t_fail, h, _exact_overflows(setup, t_fail))
         raise RunError(traj.failure, t_fail, done, traj)
     return traj
+
+
+def _exact_overflows(setup, t):
+    """Whether the scene's exact flow itself leaves floating-point range by t (then no step size helps)."""
+    if not setup.scene.has_flow or setup.method.requires == "flow":
+        return False
+    try:
+        z = simulate(Setup.make(setup.scene, "exact", setup.values), t, t).z[-1, 0]
+    except RunError:
+        return True
+    return not np.all(np.abs(z) < 1e300)
 
 
 def _trajectory(setup, h, stride, T, Z, PT, dZ, steps, wall):
@@ -187,8 +198,11 @@ def _trajectory(setup, h, stride, T, Z, PT, dZ, steps, wall):
     return Trajectory(setup, h, stride, T, Z, PT, H, steps, wall, dZ)
 
 
-def failure_message(status, step, t, h):
+def failure_message(status, step, t, h, exact_overflows=False):
     where = f"in step {step + 1} (from t = {t:.6g})"
+    if status == OVERFLOW and exact_overflows:
+        return (f"overflow {where}: the state left floating-point range (|z| > 1.8e308), as the exact solution "
+                f"does by then: shorten T below {t:.4g} (no step size helps)")
     if status == OVERFLOW:
         return (f"overflow {where}: the state left floating-point range (|z| > 1.8e308); shorten T, "
                 f"or reduce h if the solution should stay bounded")

@@ -14,6 +14,7 @@ from .diagnostics import (
     distance,
     loop_action,
     nearby_states,
+    norm,
     paper_symplectic_form,
     paper_volume_form,
     ring_states,
@@ -36,7 +37,7 @@ class Comparison:
     paper_omega, paper_volume: the paper's estimators from one-step increments (as printed).
     separation_omega: omega(z1 - z0, z2 - z0) / delta^2 (1 for a symplectic map).
     cloud, cloud_area: the carried loop and its enclosed area over its initial area.
-    error: |z - z_exact| where the scene has an exact flow, else None.
+    error: the relative error |z - z_exact| / |z_exact| where the scene has an exact flow, else None.
     Pi: mechanical momentum of the trajectory (charged scene), else None.
     """
 
@@ -57,16 +58,23 @@ class Comparison:
     def summary(self):
         """The numbers panel, from the full-resolution data."""
         return {
-            "max |H + p_t|": float(np.max(np.abs(self.run.H_ext[:, 0]))),
-            "max |det M - 1|": float(np.max(self.det_dev)) if self.det_dev.size else 0.0,
-            "max |M^T J M - J|": float(np.max(self.symp_dev)) if self.symp_dev.size else 0.0,
-            "final error": None if self.error is None else float(self.error[-1]),
+            "max |H + p_t|": finite_max(np.abs(self.run.H_ext[:, 0])),
+            "max |det M - 1|": finite_max(self.det_dev) if self.det_dev.size else 0.0,
+            "max |M^T J M - J|": finite_max(self.symp_dev) if self.symp_dev.size else 0.0,
+            "final relative error": None if self.error is None else float(self.error[-1]),
             "steps": int(self.run.steps),
             "time (s)": self.wall_s,
         }
 
 
 CLOUD_SAMPLES = 500
+
+
+def finite_max(x):
+    """The largest finite value (NaN if there is none): a run's maxima up to where it stopped."""
+    x = np.asarray(x, float)
+    ok = x[np.isfinite(x)]
+    return float(ok.max()) if ok.size else float("nan")
 
 
 def compare(setup, h, T, delta=1e-4, cloud_points=0, cloud_radius=0.05, stride=None, z0=None):
@@ -90,7 +98,8 @@ def compare(setup, h, T, delta=1e-4, cloud_points=0, cloud_radius=0.05, stride=N
     if setup.scene.has_flow:
         exact = simulate(Setup.make(setup.scene, "exact", setup.values), h * run.stride,
                          run.steps * h, z0=base[None])
-        error = distance(run.z[:, 0], exact.z[: len(run.t), 0])
+        z_exact = exact.z[: len(run.t), 0]
+        error = distance(run.z[:, 0], z_exact) / np.maximum(norm(z_exact), np.finfo(float).tiny)
     Pi = None
     if setup.scene.name == "charged":
         Pi = charged.mechanical(setup.P, run.t, run.q[:, 0], run.p[:, 0])
@@ -112,7 +121,8 @@ def compare_until_failure(setup, h, T, **options):
             return None, message
         try:
             return compare(setup, h, steps * h, **options), message
-        except RunError as again:
+        except RunError as again:  # a companion run (the carried loop) failed sooner: that is what shows
+            message = str(again)
             steps = min(steps - 1, again.step)
     return None, message
 

@@ -54,3 +54,35 @@ def rng():
 
 def setup(scene, method, theta=None, **values):
     return Setup.make(scene, method, values or None, theta)
+
+
+# The browser tests' server, browser and page (served.py), one server and browser per session.
+
+
+@pytest.fixture(scope="session")
+def server():
+    """`panel serve app --setup app/warmup.py` on a free port; yields its base URL."""
+    from served import ARTIFACTS, served
+
+    with served(ARTIFACTS / "server.log") as (url, _):
+        yield url
+
+
+@pytest.fixture(scope="session")
+def browser():
+    from playwright.sync_api import sync_playwright
+    from served import CHROMIUM, CHROMIUM_ARGS
+
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, timeout=60_000)
+        yield b
+        b.close()
+
+
+@pytest.fixture
+def page(browser, server):
+    from served import Page
+
+    p = Page(browser, server)
+    yield p
+    p.page.close()

@@ -1,6 +1,8 @@
 """The app served by `panel serve app --setup app/warmup.py` on a free loopback port, for the
-browser tests (test_app_e2e.py, test_load.py), with the Chromium they drive."""
+browser tests (test_app_e2e.py, test_app_teaching.py, test_load.py), with the Chromium they drive:
+one server and one browser for the session, and a page that records its requests and console."""
 import contextlib
+import json
 import os
 import pathlib
 import socket
@@ -8,6 +10,7 @@ import subprocess
 import sys
 import time
 import urllib.request
+from urllib.parse import urlencode
 
 import pytest
 
@@ -63,3 +66,83 @@ def _wait_until_serving(proc, port, log_path):
             if time.monotonic() > deadline:
                 pytest.fail(f"panel serve did not answer within {START_TIMEOUT_S} s")
             time.sleep(0.5)
+
+
+WAIT_MS = 20_000
+
+
+
+class Page:
+    """A browser page that records requests and console errors."""
+
+    def __init__(self, browser, base):
+        self.base = base
+        self.requests = []
+        self.errors = []
+        self.page = browser.new_page(viewport={"width": 1400, "height": 2000})
+        self.page.set_default_timeout(WAIT_MS)
+        self.page.on("request", lambda r: self.requests.append(r.url))
+        self.page.on("console", lambda m: m.type == "error" and self.errors.append(m.text))
+        self.page.on("pageerror", lambda e: self.errors.append(str(e)))
+
+    def open(self, query=""):
+        self.page.goto(self.base + query, wait_until="load")
+        self.page.wait_for_selector(".bk-tab.bk-active")
+        self.page.wait_for_selector("h2")
+
+    def shot(self, name):
+        self.page.screenshot(path=str(ARTIFACTS / f"{name}.png"))
+
+    def check(self):
+        local = ("http://127.0.0.1:", "ws://127.0.0.1:", "data:", "blob:")
+        outside = [u for u in self.requests if not u.startswith(local)]
+        assert outside == [], outside
+        assert self.errors == [], self.errors
+
+    def numbers(self):
+        """The numbers table's rows (lists of cell texts), without its wall-time row."""
+        rows = self.page.evaluate(TABLE_JS)
+        return [r for r in rows if r and r[0] != "time (s)"]
+
+    def plotted(self):
+        """A fingerprint of every plotted data column on the page (sum and length per source)."""
+        return self.page.evaluate("""() => {
+            const out = [];
+            for (const doc of Bokeh.documents) for (const m of doc.all_models) {
+                if (m.type !== "ColumnDataSource") continue;
+                const data = m.data instanceof Map ? Object.fromEntries(m.data) : m.data;
+                for (const [k, v] of Object.entries(data)) {
+                    if (!v || typeof v.length !== "number" || typeof v[0] !== "number") continue;
+                    let s = 0; for (let i = 0; i < v.length; i++) if (Number.isFinite(v[i])) s += v[i];
+                    out.push(k + ":" + v.length + ":" + s.toPrecision(12));
+                }
+            }
+            return out.sort().join("|");
+        }""")
+
+    def wait_for_numbers_change(self, before):
+        deadline = time.monotonic() + WAIT_MS / 1000
+        while self.numbers() == before:
+            assert time.monotonic() < deadline, "the numbers panel did not change"
+            self.page.wait_for_timeout(200)
+
+
+TABLE_JS = """() => {
+    // The rows of the first table widget (Tabulator) on the page, as lists of cell texts.
+    const tables = [];
+    function find(root) {
+        for (const el of root.querySelectorAll("*")) {
+            if (el.classList && el.classList.contains("tabulator")) tables.push(el);
+            if (el.shadowRoot) find(el.shadowRoot);
+        }
+    }
+    find(document);
+    if (!tables.length) return [];
+    const field = c => c.getAttribute("tabulator-field");
+    return [...tables[0].querySelectorAll(".tabulator-row")].map(row => [...row.querySelectorAll(".tabulator-cell")]
+        .filter(c => field(c) !== null && field(c) !== "index" && c.offsetParent !== null).map(c => c.innerText.trim()));
+}"""
+
+
+def query(**items):
+    return "?" + urlencode({k: v if isinstance(v, str) else json.dumps(v) for k, v in items.items()})

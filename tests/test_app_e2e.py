@@ -6,123 +6,21 @@ Every page load records every request URL (none may leave 127.0.0.1) and every c
 import json
 import shutil
 import time
-from urllib.parse import parse_qs, urlencode, urlparse
+from urllib.parse import parse_qs, urlparse
 
 import numpy as np
 import pytest
 from playwright.sync_api import expect
-from served import ARTIFACTS, CHROMIUM, CHROMIUM_ARGS, START_TIMEOUT_S, served
+from served import ARTIFACTS, CHROMIUM, START_TIMEOUT_S, TABLE_JS, WAIT_MS, query
 
 from app.features.stabilitymap import significant
 from cosymp.scenes import SCENES
-
-WAIT_MS = 20_000
 
 pytestmark = [
     pytest.mark.slow,
     pytest.mark.skipif(not shutil.which(CHROMIUM), reason=f"no Chromium at {CHROMIUM} (apt-get install it)"),
     pytest.mark.timeout(START_TIMEOUT_S + 120),
 ]
-
-
-@pytest.fixture(scope="module")
-def server():
-    """`panel serve app --setup app/warmup.py` on a free port; yields its base URL."""
-    with served(ARTIFACTS / "server.log") as (url, _):
-        yield url
-
-
-@pytest.fixture(scope="module")
-def browser():
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, timeout=60_000)
-        yield b
-        b.close()
-
-
-class Page:
-    """A browser page that records requests and console errors."""
-
-    def __init__(self, browser, base):
-        self.base = base
-        self.requests = []
-        self.errors = []
-        self.page = browser.new_page(viewport={"width": 1400, "height": 2000})
-        self.page.set_default_timeout(WAIT_MS)
-        self.page.on("request", lambda r: self.requests.append(r.url))
-        self.page.on("console", lambda m: m.type == "error" and self.errors.append(m.text))
-        self.page.on("pageerror", lambda e: self.errors.append(str(e)))
-
-    def open(self, query=""):
-        self.page.goto(self.base + query, wait_until="load")
-        self.page.wait_for_selector(".bk-tab.bk-active")
-        self.page.wait_for_selector("h2")
-
-    def shot(self, name):
-        self.page.screenshot(path=str(ARTIFACTS / f"{name}.png"))
-
-    def check(self):
-        local = ("http://127.0.0.1:", "ws://127.0.0.1:", "data:", "blob:")
-        outside = [u for u in self.requests if not u.startswith(local)]
-        assert outside == [], outside
-        assert self.errors == [], self.errors
-
-    def numbers(self):
-        """The numbers table's rows (lists of cell texts), without its wall-time row."""
-        rows = self.page.evaluate(TABLE_JS)
-        return [r for r in rows if r and r[0] != "time (s)"]
-
-    def plotted(self):
-        """A fingerprint of every plotted data column on the page (sum and length per source)."""
-        return self.page.evaluate("""() => {
-            const out = [];
-            for (const doc of Bokeh.documents) for (const m of doc.all_models) {
-                if (m.type !== "ColumnDataSource") continue;
-                const data = m.data instanceof Map ? Object.fromEntries(m.data) : m.data;
-                for (const [k, v] of Object.entries(data)) {
-                    if (!v || typeof v.length !== "number" || typeof v[0] !== "number") continue;
-                    let s = 0; for (let i = 0; i < v.length; i++) if (Number.isFinite(v[i])) s += v[i];
-                    out.push(k + ":" + v.length + ":" + s.toPrecision(12));
-                }
-            }
-            return out.sort().join("|");
-        }""")
-
-    def wait_for_numbers_change(self, before):
-        deadline = time.monotonic() + WAIT_MS / 1000
-        while self.numbers() == before:
-            assert time.monotonic() < deadline, "the numbers panel did not change"
-            self.page.wait_for_timeout(200)
-
-
-TABLE_JS = """() => {
-    // The rows of the first table widget (Tabulator) on the page, as lists of cell texts.
-    const tables = [];
-    function find(root) {
-        for (const el of root.querySelectorAll("*")) {
-            if (el.classList && el.classList.contains("tabulator")) tables.push(el);
-            if (el.shadowRoot) find(el.shadowRoot);
-        }
-    }
-    find(document);
-    if (!tables.length) return [];
-    const field = c => c.getAttribute("tabulator-field");
-    return [...tables[0].querySelectorAll(".tabulator-row")].map(row => [...row.querySelectorAll(".tabulator-cell")]
-        .filter(c => field(c) !== null && field(c) !== "index" && c.offsetParent !== null).map(c => c.innerText.trim()));
-}"""
-
-
-@pytest.fixture
-def page(browser, server):
-    p = Page(browser, server)
-    yield p
-    p.page.close()
-
-
-def query(**items):
-    return "?" + urlencode({k: v if isinstance(v, str) else json.dumps(v) for k, v in items.items()})
 
 
 def test_loads_with_the_paper_defaults_and_a_slider_updates_the_plots(page):
@@ -268,11 +166,11 @@ def test_a_long_run_starts_shows_progress_and_cancels(page):
 
 
 def test_theta_lesson_and_shared_link(page):
-    page.open(query(scene="decaying", view="theta", theta=0.3))
+    page.open(query(scene="decaying", view="theta", lesson_theta=0.4))
     page.page.get_by_text("theta-naive").first.wait_for()
     page.page.wait_for_timeout(2000)
     page.shot("09-theta-lesson")
-    assert "theta=0.3" in page.page.url and "view=theta" in page.page.url
+    assert "lesson_theta=0.4" in page.page.url and "view=theta" in page.page.url
     link = page.page.url
     page.open(link.split("/app", 1)[1])
     assert page.page.locator(".bk-tab.bk-active").inner_text() == "Theta lesson"

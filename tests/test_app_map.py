@@ -25,7 +25,7 @@ def tongue():
 
 
 def test_each_scene_gets_its_default_axes_and_the_study_names_its_choices():
-    s = Study()
+    s = Study(scene="damped")
     m = StabilityMap(s)
     for scene in SCENES.values():
         s.scene = scene.name
@@ -35,7 +35,8 @@ def test_each_scene_gets_its_default_axes_and_the_study_names_its_choices():
         assert m.param.x.objects == numeric + ["h", "T"]
         assert xn != yn and {xn, yn} <= set(numeric + ["h", "T"]) and x0 < x1 and y0 < y1
         if scene.name in MAP_AXES:
-            assert maps.map_axes(scene) == MAP_AXES[scene.name]
+            assert maps.map_axes(scene) == MAP_AXES[scene.name][:2]
+        assert m.measure == maps.first_measure(scene) and m.measure in sweep.MEASURES
     s.method = "theta"
     assert m.param.x.objects[-1] == "theta" and (m.x, m.y) == ("nu", "a")
 

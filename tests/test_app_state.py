@@ -10,7 +10,7 @@ from urllib.parse import parse_qsl, urlsplit
 import numpy as np
 import pytest
 
-from app import memory, study
+from app import memory, plotting, study
 from app.features import cloud, common, gauges, longrun, orbits, structure, theta
 from app.plotting import DENSE, POINTS, Raster
 from app.presets import PRESETS, URL_NAMES, parse_items, query_items
@@ -37,21 +37,35 @@ def shown_figures(view):
 
 
 def test_a_parameter_change_changes_the_plotted_data():
-    s = Study()
+    s = Study(scene="damped")
     view = drawn(orbits.OrbitsView(s))
     figs = shown_figures(view)
-    before, phase_before = plotted(figs.energy), plotted(figs.portraits[0][1])
+    before, phase_before = plotted(figs.energy), plotted(figs.portraits[0][2])
     s.inputs.gamma = 0.3
     assert s.values == {"gamma": 0.3}
     assert s.results.entries[0].comparison.setup.values["gamma"] == 0.3
     after = plotted(figs.energy)
     assert before.shape != after.shape or not np.allclose(before, after)
-    assert not np.allclose(phase_before, plotted(figs.portraits[0][1]))
+    assert not np.allclose(phase_before, plotted(figs.portraits[0][2]))
     assert shown_figures(view) is figs, "a parameter change keeps the figures and replaces their data"
 
 
-def test_values_and_inputs_follow_each_other():
+def test_the_first_view_shows_rk4_drifting_out_of_the_symplectic_band():
+    """What a newcomer sees first: RK4's |H + p_t| starts below midpoint's band, drifts, and ends
+    well above it, while the band stays put (its maximum over the first and the last tenth)."""
     s = Study()
+    assert (s.scene, s.method, s.other, s.h, s.T) == ("modulated", "midpoint", "rk4", 0.2, 2000.0)
+    midpoint, rk4 = (np.abs(e.comparison.run.H_ext[:, 0]) for e in s.results.entries)
+    tenth = len(midpoint) // 10
+    assert midpoint[-tenth:].max() < 1.2 * midpoint[:tenth].max(), "the symplectic band does not grow"
+    assert rk4[:tenth // 2].max() < midpoint.max() < rk4[-1] / 5, "RK4 starts inside the band and ends far above it"
+    text = common.verdict(s.results)
+    assert "rk4's |H + p_t| leaves midpoint's bounded band" in text and "rk4 drifts, midpoint does not" in text
+    assert s.state() == {**PRESETS[0].state, "theta": 0.5}
+
+
+def test_values_and_inputs_follow_each_other():
+    s = Study(scene="damped")
     s.values = {"gamma": -0.1, "q0": 2.0}
     assert (s.inputs.gamma, s.inputs.q0) == (-0.1, 2.0)
     assert s.results.entries[0].comparison.run.q[0, 0, 0] == 2.0
@@ -60,7 +74,7 @@ def test_values_and_inputs_follow_each_other():
 
 
 def test_switching_scenes_rebuilds_the_controls_and_the_portraits():
-    s = Study()
+    s = Study(scene="damped")
     view = drawn(orbits.OrbitsView(s))
     s.values = {"gamma": 0.3}
     s.scene = "charged"
@@ -72,11 +86,11 @@ def test_switching_scenes_rebuilds_the_controls_and_the_portraits():
     assert len(labels) == len(names) and labels[5].startswith("beta(t)") and labels[6] == "gauge"
     assert s.results.scene == "charged" and not s.results.dense
     assert len(common.phase_axes("charged")) == 3
-    assert view._shown == ("charged", False) and len(view.grid.objects) == 4
+    assert view._shown == ("charged", False, False) and len(view.grid.objects) == 4
 
 
 def test_a_number_control_follows_its_parameter_both_ways_and_widens_to_typed_values():
-    s = Study()
+    s = Study(scene="damped")
     slider, box = study.scene_widgets(s.inputs)[2]
     assert slider.name == "gamma" and (slider.start, slider.end) == s.inputs.param.gamma.softbounds
     slider.value = 0.5
@@ -88,7 +102,7 @@ def test_a_number_control_follows_its_parameter_both_ways_and_widens_to_typed_va
 
 
 def test_an_out_of_range_typed_value_is_refused_and_the_box_shows_the_last_good_one():
-    s = Study()
+    s = Study(scene="damped")
     slider, box = study.scene_widgets(s.inputs)[2]
     good = s.results
     box.value = 1e6
@@ -139,6 +153,9 @@ def test_bad_input_keeps_the_last_good_state_and_says_what_to_change(change, nee
 def test_a_link_with_a_bad_step_shows_the_scenes_own_run_and_says_so():
     for query in ({"h": -1.0}, {"T": 1e300}):
         s = Study(**query)
+        assert s.results is not None and (s.h, s.T) == (0.2, 2000.0), "the first view"
+        assert s.message.level == "error"
+        s = Study(scene="damped", **query)
         assert s.results is not None and (s.h, s.T) == (SCENES["damped"].h, SCENES["damped"].T)
         assert s.message.level == "error"
 
@@ -167,7 +184,7 @@ def test_a_failing_run_shows_its_data_up_to_the_failure_time():
 
 @pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
 def test_an_overflowing_run_says_when():
-    s = Study(T=7500.0)
+    s = Study(scene="damped", T=7500.0)
     for e in s.results.entries:
         assert "overflow" in e.failure
         t_end = e.comparison.run.t[-1]
@@ -182,6 +199,7 @@ def test_numbers_table_is_the_full_resolution_summary():
     c = s.results.entries[0].comparison
     label = s.results.entries[0].label
     assert cols[label][0] == f"{c.summary['max |H + p_t|']:.3g}" and cols[label][4] == "20,000"
+    assert next(iter(cols)) == "h = 0.001, T = 20"
     view = drawn(orbits.OrbitsView(s))
     assert list(view.table.value[label]) == cols[label]
 
@@ -192,21 +210,21 @@ def test_series_are_downsampled_and_dense_portraits_rasterized():
     assert len(s.results.entries[0].comparison.run.t) == 20001
     energy = shown_figures(view).energy
     assert all(0 < len(src.data["x"]) <= POINTS for src in energy.sources.values())
-    H = s.results.entries[0].comparison.run.H_ext[:, 0]
+    H = np.abs(s.results.entries[0].comparison.run.H_ext[:, 0])
     y = energy.sources["A"].data["y"]
-    assert y.max() == H.max() and y.min() == H.min(), "the envelope keeps the extremes"
+    assert y.max() == H.max() and y.min() >= plotting.FLOOR, "the per-bin maxima keep the largest |H + p_t|"
     s.T = 200.0
     assert s.results.dense and len(s.results.entries[0].comparison.run.t) > DENSE
     figs = shown_figures(view)
-    assert all(isinstance(drawn_, Raster) for _, drawn_ in figs.portraits)
-    labels = [(f.xaxis.axis_label, f.yaxis.axis_label) for f, _ in figs.portraits]
+    assert all(isinstance(drawn_, Raster) for _, _, drawn_ in figs.portraits)
+    labels = [(f.xaxis.axis_label, f.yaxis.axis_label) for _, f, _ in figs.portraits]
     assert labels == [("x", "y"), ("x", "p_x"), ("y", "p_y")]
-    image = figs.portraits[0][1].sources["A"].data["image"][0]
+    image = figs.portraits[0][2].sources["A"].data["image"][0]
     assert image.dtype == np.uint32 and (image >> 24).max() > 0
 
 
 def test_the_structure_and_cloud_views_plot_the_rigorous_checks():
-    s = Study()
+    s = Study(scene="damped")
     view = drawn(structure.StructureView(s))
     det = view.plots["det"].sources
     c = s.results.entries[0].comparison
@@ -217,8 +235,9 @@ def test_the_structure_and_cloud_views_plot_the_rigorous_checks():
 
 
 def test_theta_lesson_shows_lifted_symplectic_for_every_theta_and_naive_only_at_half():
-    s = Study(view="theta", theta=0.3)
+    s = Study(view="theta")
     lesson = theta.ThetaLesson(s)
+    assert lesson.theta == 0.3, "the lesson opens where the two methods differ"
     lifted, naive = (e.comparison for e in lesson.results.entries)
     assert np.max(lifted.det_dev) < 1e-12 and np.max(naive.det_dev) > 1e-6
     assert abs(lifted.cloud_area[-1] - 1) < 1e-9 and abs(naive.cloud_area[-1] - 1) > 1e-6
@@ -227,14 +246,17 @@ def test_theta_lesson_shows_lifted_symplectic_for_every_theta_and_naive_only_at_
     assert np.all(sweep["theta"]["det"] < 1e-12)
     assert sweep["theta-naive"]["det"][half] < 1e-12
     assert np.all(np.delete(sweep["theta-naive"]["det"], half) > 1e-8)
-    s.theta = 0.7
+    lesson.theta = 0.7
     assert lesson.results.entries[0].comparison.setup.theta == 0.7
     view = drawn(theta.ThetaView(s, lesson))
     assert [m.location for m in view.marks] == [0.7, 0.7]
+    area = view.plots["area"]
+    assert area.active is area.log, "the naive method's area grows by decades: |area| on a log axis"
+    assert drawn(structure.StructureView(s)).plots["area"].active.fig.yaxis[0].__class__.__name__ == "LinearAxis"
 
 
 def test_theta_lesson_waits_until_it_is_shown():
-    s = Study()
+    s = Study(scene="damped")
     lesson = theta.ThetaLesson(s)
     assert lesson.results is None
     s.view = "theta"
@@ -256,13 +278,13 @@ def test_gauge_study_gives_every_gauge_and_invariant_transported_observables():
 
 
 def test_long_run_in_chunks_matches_the_one_shot_run_and_can_be_cancelled():
-    s = Study(values={"gamma": 0.0002})
+    s = Study(scene="damped", values={"gamma": 0.0002})
     lr = longrun.LongRun(s, T_long=2000.0)
     lr.start()
     assert lr.status.startswith("done") and lr.progress == 1.0 and not lr.running
     data = lr.data
     assert set(data) == {"midpoint", "rk4"}
-    one_shot = Study(values={"gamma": 0.0002}, T=2000.0).results
+    one_shot = Study(scene="damped", values={"gamma": 0.0002}, T=2000.0).results
     for e in one_shot.entries:
         d = data[e.label]
         H = e.comparison.run.H_ext[1:, 0]
@@ -275,7 +297,7 @@ def test_long_run_in_chunks_matches_the_one_shot_run_and_can_be_cancelled():
 
 
 def test_long_run_of_a_diverging_setup_stops_with_data_up_to_there():
-    s = Study()
+    s = Study(scene="damped")
     lr = longrun.LongRun(s, T_long=1e4)
     lr.start()
     assert lr.status.startswith("stopped early")
@@ -287,7 +309,7 @@ def test_long_run_of_a_diverging_setup_stops_with_data_up_to_there():
 
 
 def test_long_run_refuses_a_horizon_over_the_cap():
-    s = Study()
+    s = Study(scene="damped")
     lr = longrun.LongRun(s, T_long=1e8)
     lr.start()
     assert not lr.running and lr.data == {} and "cap" in s.message.text
@@ -353,7 +375,7 @@ def test_a_comparison_leases_an_upper_bound_of_its_peak_memory(scene, h, T):
 def test_a_request_over_the_memory_cap_is_refused_and_the_last_results_stay(monkeypatch):
     budget = memory.MemoryBudget(cap_bytes=100 << 20)
     monkeypatch.setattr(memory, "BUDGET", budget)
-    s = Study()
+    s = Study(scene="damped")
     before = s.results
     held = budget.used
     assert held == s._held.nbytes > 0
@@ -361,7 +383,7 @@ def test_a_request_over_the_memory_cap_is_refused_and_the_last_results_stay(monk
     assert s.results is before and s.message.level == "error"
     assert "more than this server's cap of 100 MB (COSYMP_MEMORY_CAP_MB)" in s.message.text
     assert budget.used == held and (s.h, s.T) == (0.1, 50.0)
-    other = Study(T=3000.0)  # 35 MB
+    other = Study(scene="damped", T=3000.0)  # 35 MB
     assert other.message is None and other.results.T == 3000.0
     s.release()
     other.release()
@@ -371,8 +393,8 @@ def test_a_request_over_the_memory_cap_is_refused_and_the_last_results_stay(monk
 def test_a_busy_server_refuses_with_a_message_until_memory_is_free(monkeypatch):
     budget = memory.MemoryBudget(cap_bytes=100 << 20)
     monkeypatch.setattr(memory, "BUDGET", budget)
-    first = Study(T=6000.0)  # 69 MB
-    second = Study()
+    first = Study(scene="damped", T=6000.0)  # 69 MB
+    second = Study(scene="damped")
     second.T = 6000.0
     assert "free while other runs hold the rest" in second.message.text
     assert second.results.T == 50.0
@@ -384,7 +406,7 @@ def test_a_busy_server_refuses_with_a_message_until_memory_is_free(monkeypatch):
 def test_long_runs_and_measurements_give_their_memory_back(monkeypatch):
     budget = memory.MemoryBudget(cap_bytes=1 << 30)
     monkeypatch.setattr(memory, "BUDGET", budget)
-    s = Study()
+    s = Study(scene="damped")
     held = budget.used
     lr = longrun.LongRun(s, T_long=2000.0)
     lr.start()
@@ -399,7 +421,7 @@ def test_a_closed_page_draws_nothing_more_and_holds_no_memory(monkeypatch):
     session alive in Panel's registry of views."""
     budget = memory.MemoryBudget(cap_bytes=1 << 30)
     monkeypatch.setattr(memory, "BUDGET", budget)
-    s = Study()
+    s = Study(scene="damped")
     shown = s.results
     run = s._begin()
     s.release()
@@ -420,7 +442,7 @@ def test_a_cancelled_long_run_frees_its_chunks_and_its_lease(monkeypatch):
 
     budget = memory.MemoryBudget(cap_bytes=1 << 30)
     monkeypatch.setattr(memory, "BUDGET", budget)
-    s = Study(values={"gamma": 2e-4})
+    s = Study(scene="damped", values={"gamma": 2e-4})
     held = budget.used
     tracemalloc.start()
     for _ in range(2):
@@ -455,7 +477,7 @@ def test_a_long_run_redraws_at_most_once_per_interval_and_ends_with_everything(m
 
     monkeypatch.setattr(longrun, "LONG_CHUNK_SECONDS", 0.01)
     monkeypatch.setattr(longrun, "LONG_DRAW_SECONDS", 0.1)
-    s = Study(values={"gamma": 2e-4})
+    s = Study(scene="damped", values={"gamma": 2e-4})
     lr = longrun.LongRun(s, T_long=1e5)
     progress, drawn_ = [], []
     lr.param.watch(lambda e: progress.append(time.perf_counter()), "progress")
@@ -511,7 +533,7 @@ def test_a_long_run_whose_page_closed_stops_and_publishes_nothing_more(monkeypat
     and publishes neither the envelopes computed since the last redraw nor a status."""
     budget = memory.MemoryBudget(cap_bytes=1 << 30)
     monkeypatch.setattr(memory, "BUDGET", budget)
-    s = Study(values={"gamma": 2e-4})
+    s = Study(scene="damped", values={"gamma": 2e-4})
     held = budget.used
     lr = longrun.LongRun(s, T_long=2e5)
     published, at_release = [], []

@@ -241,8 +241,8 @@ class Sessions:
                 len(set(re.findall(r"Session (\d+) destroyed", text))))
 
     def freed(self):
-        """How many pages' App objects were garbage-collected (app.state.log_when_freed logs each one)."""
-        from app.state import FREED
+        """How many pages' App objects were garbage-collected (app.memory.log_when_freed logs each one)."""
+        from app.memory import FREED
 
         return self.log_path.read_text(errors="replace").count(FREED)
 
@@ -425,7 +425,8 @@ async def toast(page, *texts):
 
 
 def header(page):
-    return page.locator("table.numbers tr").first
+    """The numbers table's first column title: what the numbers were computed for (h and T)."""
+    return page.locator(".tabulator-col-title").first
 
 
 async def refusals(page, sampler, long_running):
@@ -434,7 +435,7 @@ async def refusals(page, sampler, long_running):
     (computed). Returns the texts, the RSS around the refusals and the good value's latency."""
     from playwright.async_api import expect
 
-    from app.state import comparison_bytes
+    from app.study import comparison_bytes
     from cosymp.integrate import Setup
 
     setups = [Setup.make("damped", m) for m in ("midpoint", "rk4")]
@@ -467,7 +468,6 @@ async def scenario(base, sampler, sessions, probe=None):
     from playwright.async_api import async_playwright
 
     from app.presets import PRESETS
-    from app.state import LONG_URL_NAMES, URL_NAMES
 
     paper = next(p for p in PRESETS if p.name == "Fig. damped: volume form (gamma 2e-4, T 5e5)")
     preset = dataclasses.replace(paper, T_long=LONG_T)
@@ -478,7 +478,7 @@ async def scenario(base, sampler, sessions, probe=None):
         browser = await p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, timeout=60_000)
         try:
             # Priming: the first page's one-time costs, then idle.
-            context, _, _ = await new_page(browser, base, "table.numbers")
+            context, _, _ = await new_page(browser, base, ".tabulator-row")
             await context.close()
             r["priming_destroyed_s"] = await asyncio.to_thread(sessions.wait_all_destroyed)
             rss, threads = await asyncio.to_thread(sampler.settled)
@@ -490,7 +490,7 @@ async def scenario(base, sampler, sessions, probe=None):
             # session costs ~3 s of the event loop; ten opened at once take ~50 s to connect).
             opened = []
             for _ in range(SLIDER_PAGES):
-                opened.append(await new_page(browser, base, "table.numbers"))
+                opened.append(await new_page(browser, base, ".tabulator-row"))
             r["page_load_s"] = [round(s, 2) for _, _, s in opened]
             r["live_sessions_after_open"] = sessions.live()
 
@@ -501,7 +501,7 @@ async def scenario(base, sampler, sessions, probe=None):
             r["pages_open"] = {"rss_mb": round(rss, 1), "threads": threads}
 
             # Page 0: the long run.
-            long_ctx, long_page, _ = await new_page(browser, base + preset.query(URL_NAMES, LONG_URL_NAMES),
+            long_ctx, long_page, _ = await new_page(browser, base + preset.query(),
                                                     "button:has-text('Start long run')")
             await long_page.locator("button", has_text="Start long run").click()
             await long_page.get_by_text("running").first.wait_for()

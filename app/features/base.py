@@ -39,9 +39,14 @@ class FeatureView(pn.viewable.Viewer):
         if self._layout is None:
             self._layout = self.layout()
             self._stale = True
+            self.first_shown()
         if self._stale:
             self.redraw()
         return self._layout
+
+    def first_shown(self):
+        """Called once, when the tab is first shown (a tab whose data is measured on demand starts
+        its first measurement here, so that it never opens empty)."""
 
     def shown(self):
         """Its tab has become the shown one."""

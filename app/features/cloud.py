@@ -61,7 +61,7 @@ class CloudView(FeatureView):
         self.key = note("")
         self.follow(self.study, "results")
         return pn.Column(self.key, note(CLOUD_TEXT), grid(*[pane(s.fig) for s in self.snapshots.values()]),
-                         grid(pane(self.plots["area"].fig)), sizing_mode="stretch_width")
+                         grid(self.plots["area"].panel), sizing_mode="stretch_width")
 
     def update(self):
         runs = self.study.results

@@ -39,12 +39,39 @@ def color_key(runs):
     return "<div class='colorkey'>" + "&emsp;&emsp;".join(parts) + "</div>"
 
 
-NUMBER_ROWS = ("max |H + p_t|", "max |det M - 1|", "max |M^T J M - J|", "final error", "steps", "time (s)")
+def verdict(runs):
+    """One sentence on what the |H + p_t| plot shows, from the data: where a method that preserves
+    nothing leaves the band of one that is symplectic, or that it has not (yet) at this T."""
+    kept, lost = {}, {}
+    for e in runs.entries if runs is not None else ():
+        if e.comparison is None:
+            continue
+        m = METHODS[e.method]
+        theta = e.comparison.setup.theta
+        kind = m.preserves_at(0.5 if theta is None else theta)
+        (kept if kind == "symplectic" else lost if kind == "none" else {})[e.label] = e.comparison.run
+    if len(kept) != 1 or len(lost) != 1:
+        return ""
+    (p, kr), (n, lr) = next(iter(kept.items())), next(iter(lost.items()))
+    band = float(np.nanmax(np.abs(kr.H_ext[:, 0])))
+    drift = np.abs(lr.H_ext[:, 0])
+    above = np.flatnonzero(drift > band)
+    if not above.size:
+        return (f"<p class='verdict'>Up to T = {runs.T:g}, {html.escape(n)}'s |H + p_t| (at most {drift.max():.2g}) "
+                f"stays below {html.escape(p)}'s bounded band ({band:.2g}); a method that preserves nothing lets "
+                "it grow with T: the Long run tab goes further.</p>")
+    return (f"<p class='verdict'>{html.escape(n)}'s |H + p_t| leaves {html.escape(p)}'s bounded band ({band:.2g}) at "
+            f"t ≈ {lr.t[above[0]]:.3g} and ends {drift[-1] / band:.3g}× above it at t = {lr.t[-1]:g}: "
+            f"{html.escape(n)} drifts, {html.escape(p)} does not.</p>")
+
+
+NUMBER_ROWS = ("max |H + p_t|", "max |det M - 1|", "max |M^T J M - J|", "final relative error", "steps",
+               "time (s)")
 
 
 def numbers(runs):
     """The numbers table (Comparison.summary, maxima over every step) as columns of text."""
-    cols = {"quantity": list(NUMBER_ROWS) + ["run"]}
+    cols = {f"h = {runs.h:g}, T = {runs.T:g}" if runs is not None else "": list(NUMBER_ROWS) + ["run"]}
     for e in runs.entries if runs is not None else ():
         summary = e.comparison.summary if e.comparison is not None else {}
         cols[e.label] = [fmt(summary.get(k)) for k in NUMBER_ROWS] + [e.failure or "reached T"]

@@ -2,7 +2,6 @@
 per-gauge runs beside the transported maps, their differences from the original gauge, and
 where the paper's gauges do not satisfy the condition their names promise."""
 import html
-import math
 
 import numpy as np
 import panel as pn
@@ -17,7 +16,7 @@ from cosymp.scenes.charged import GAUGES
 from cosymp.study import gauge_study
 
 from ..jobs import Note
-from ..plotting import FLOOR, POINTS, figure, grid, note, pane, path, series, source, swatch
+from ..plotting import figure, grid, note, pane, path, peaks, series, source, swatch
 from ..study import comparison_bytes, theta_for
 from .base import Feature, FeatureView, Follower
 
@@ -92,20 +91,8 @@ def gauge_series(data, kind, quantity):
             out[g] = series(t, Pi[:, 0])
         else:
             _, q0, _, Pi0 = data["original"][kind]
-            d = np.linalg.norm(q - q0, axis=-1) + np.linalg.norm(Pi - Pi0, axis=-1)
-            out[g] = upper_envelope(t, np.maximum(d, FLOOR))
+            out[g] = peaks(t, np.linalg.norm(q - q0, axis=-1) + np.linalg.norm(Pi - Pi0, axis=-1))
     return out
-
-
-def upper_envelope(t, y):
-    """The maximum of each of at most POINTS bins (round-off differences drawn as their bound, not
-    as a band of noise)."""
-    if len(y) <= POINTS:
-        return t, y
-    width = math.ceil(len(y) / POINTS)
-    padded = np.full(math.ceil(len(y) / width) * width, -np.inf)
-    padded[:len(y)] = y
-    return t[::width], padded.reshape(-1, width).max(axis=1)
 
 
 class GaugeView(FeatureView):

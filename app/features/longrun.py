@@ -182,8 +182,9 @@ def long_key(data):
         return ""
     methods = [d["method"] for d in data.values()] + [""]
     colors = pair_colors(methods[0], methods[1])
-    parts = [swatch(color, label, dashed=i == 1) + (f" <span class='caveat'>stopped: {html.escape(d['failure'])}</span>"
-                                                     if d["failure"] else "")
+    parts = [swatch(color, label, dashed=i == 1)
+             + (f" <span class='caveat' title='{html.escape(d['failure'])}'>stopped at t = {d['t'][-1]:.6g}</span>"
+                if d["failure"] and len(d["t"]) else "")
              for i, ((label, d), color) in enumerate(zip(data.items(), colors))]
     return "<div class='colorkey'>" + "&emsp;&emsp;".join(parts) + "</div>"
 
@@ -212,6 +213,10 @@ class LongRunView(FeatureView):
             note(status), self.key,
             grid(*[pane(p.fig) for p in self.plots.values()]),
             sizing_mode="stretch_width")
+
+    def first_shown(self):
+        if not self.state.data and not self.state.running:
+            self.state.start()
 
     def update(self):
         data = self.state.data

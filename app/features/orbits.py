@@ -1,48 +1,65 @@
-"""Orbits: phase portraits of both methods, H~ = H + p_t, the error against the exact flow, and
-the numbers over every step. It shows the sidebar's comparison (no state of its own)."""
+"""Orbits: phase portraits of both methods, |H~| = |H + p_t| over the run, the relative error
+against the exact flow, and the numbers over every step. It shows the sidebar's comparison."""
+import numpy as np
 import pandas as pd
 import panel as pn
 
 from cosymp.scenes import SCENES
 
-from ..plotting import Pair, Raster, figure, grid, note, pane, path, reset_ranges, table
+from ..plotting import SLOTS, Pair, Raster, figure, grid, note, pane, path, peaks, reset_ranges, table
 from .base import Feature, FeatureView
-from .common import color_key, comparisons, names, numbers, over_time, phase_axes, zcols
+from .common import color_key, comparisons, names, numbers, over_time, phase_axes, verdict, zcols
 
 NUMBERS_TEXT = "<h4>Numbers</h4><p class='doc'>From the full-resolution runs: maxima over every step.</p>"
+APART = 1e3  # two orbits whose sizes differ by more than this are drawn in portraits of their own
+
+
+def apart(runs):
+    """Whether the two methods' orbits differ so much in size (one blowing up) that one portrait
+    would hide the smaller."""
+    sizes = []
+    for c in comparisons(runs).values():
+        z = c.run.z[:, 0]
+        z = z[np.isfinite(z)]
+        sizes.append(np.max(np.abs(z)) if z.size else 0.0)
+    return len(sizes) == 2 and min(sizes) > 0 and max(sizes) > APART * min(sizes)
 
 
 class Figures:
-    """The figures of one layout: the scene's portraits (lines, or rasters when dense), H~ and,
-    with an exact flow, the error."""
+    """The figures of one layout: the scene's portraits (lines, or rasters when dense; one per
+    method when their sizes are far apart), max |H~| per bin and, with an exact flow, the error."""
 
-    def __init__(self, scene, dense):
-        self.scene = scene
+    def __init__(self, scene, dense, split):
         self.axes = phase_axes(scene)
+        self.split = split
         self.portraits = []
         for _, _, xl, yl, title in self.axes:
-            fig = figure(title, xl, yl)
-            self.portraits.append((fig, Raster(fig) if dense else Pair(fig, start=True)))
-        self.energy = Pair(figure("H~ = H + p_t (per-bin min and max)", "t", "H + p_t"))
-        self.error = Pair(figure("error |z − z_exact|", "t", "|z − z_exact|", logy=True)) \
+            for slot in (SLOTS if split else (None,)):
+                fig = figure(title if slot is None else f"{slot}: {title}", xl, yl)
+                self.portraits.append((slot, fig, Raster(fig) if dense else Pair(fig, start=True)))
+        self.energy = Pair(figure("max |H + p_t| per bin (0 for the exact flow)", "t", "|H + p_t|", logy=True))
+        self.error = Pair(figure("relative error |z − z_exact| / |z_exact|", "t", "relative error", logy=True)) \
             if SCENES[scene].has_flow else None
-        figs = [f for f, _ in self.portraits] + [self.energy.fig] + ([self.error.fig] if self.error else [])
+        figs = [f for _, f, _ in self.portraits] + [self.energy.fig] + ([self.error.fig] if self.error else [])
         self.panes = [pane(f) for f in figs]
 
     def update(self, runs):
         cs = comparisons(runs)
-        for (i, j, *_), (_, drawn) in zip(self.axes, self.portraits):
+        per_axis = len(SLOTS) if self.split else 1
+        for k, (slot, _, drawn) in enumerate(self.portraits):
+            i, j = self.axes[k // per_axis][:2]
             drawn.colors(names(runs))
-            drawn.set({slot: (zcols(c.run, i, j) if isinstance(drawn, Raster) else path(*zcols(c.run, i, j)))
-                       for slot, c in cs.items()})
+            shown = {s: c for s, c in cs.items() if slot is None or s == slot}
+            drawn.set({s: (zcols(c.run, i, j) if isinstance(drawn, Raster) else path(*zcols(c.run, i, j)))
+                       for s, c in shown.items()})
         self.energy.colors(names(runs))
-        self.energy.set(over_time(runs, lambda c: (c.run.t, c.run.H_ext[:, 0])))
+        self.energy.set({slot: peaks(c.run.t, np.abs(c.run.H_ext[:, 0])) for slot, c in cs.items()})
         if self.error is not None:
             self.error.colors(names(runs))
             self.error.set(over_time(runs, lambda c: (c.run.t, c.error), logy=True))
 
     def reset(self):
-        for fig, _ in self.portraits:
+        for _, fig, _ in self.portraits:
             reset_ranges(fig)
         for p in (self.energy, self.error):
             if p is not None:
@@ -58,7 +75,7 @@ class OrbitsView(FeatureView):
         self.key = note("")
         self.grid = grid()
         self.remark = note("")
-        self.table = table(["quantity"])
+        self.table = table([""])
         self.follow(self.study, "results")
         return pn.Column(self.key, self.grid, self.remark, note(NUMBERS_TEXT), self.table,
                          sizing_mode="stretch_width")
@@ -67,21 +84,21 @@ class OrbitsView(FeatureView):
         runs = self.study.results
         if runs is None:
             return
-        which = (runs.scene, runs.dense)
+        which = (runs.scene, runs.dense, apart(runs))
         figs = self._figures.get(which)
         if figs is None:
             figs = self._figures[which] = Figures(*which)
         if which != self._shown:
             if self._shown is None or self._shown[0] != runs.scene:
                 figs.reset()
-            self.grid.ncols = 3 if len(figs.panes) == 3 else 2
+            self.grid.ncols = 3 if len(figs.panes) in (3, 6) else 2
             self.grid.objects = list(figs.panes)
             self._shown = which
             self.remark.object = "" if SCENES[runs.scene].has_flow else (
                 f"<p class='doc'>No closed-form flow for '{runs.scene}', so no error plot (the command line's "
                 "<code>cosymp run</code> measures the error at T against a fine RK8 reference).</p>")
         figs.update(runs)
-        self.key.object = color_key(runs)
+        self.key.object = color_key(runs) + verdict(runs)
         self.table.value = pd.DataFrame(numbers(runs))
 
 

@@ -8,7 +8,7 @@ import param
 from ..plotting import Pair, figure, grid, note, pane, path, push, reset_ranges, vline
 from .base import Feature, FeatureView
 from .cloud import closed
-from .common import color_key, comparisons, names, over_time, phase_axes, zcols
+from .common import color_key, comparisons, names, phase_axes, zcols
 from .structure import time_plots, update_plots
 
 TRACE_POINTS = 2000
@@ -18,7 +18,7 @@ class Playback(param.Parameterized):
     """The animation's position (frame of FRAMES) and speed (frames per second)."""
 
     FRAMES = 200
-    frame = param.Integer(default=200, bounds=(0, 200), doc="Current frame; FRAMES shows the whole run.")
+    frame = param.Integer(default=0, bounds=(0, 200), doc="Current frame: 0 the start, FRAMES the whole run.")
     fps = param.Selector(default=20, objects={"5 frames/s": 5, "10 frames/s": 10, "20 frames/s": 20,
                                               "40 frames/s": 40}, doc="Playback speed.")
 
@@ -49,22 +49,25 @@ class PlayView(FeatureView):
         self.trace = Pair(self.orbit_fig, width=2)
         self.now = Pair(self.orbit_fig, width=0, start=True)
         self.loop = Pair(figure("loop of initial states, now", "q1", "p1"), width=2)
-        self.energy = Pair(figure("H~ = H + p_t", "t", "H + p_t"))
-        self.plots = time_plots(["area"])
-        self.cursors = [vline(self.energy.fig), vline(self.plots["area"].fig)]
+        self.plots = time_plots(["energy", "area"])
+        self.cursors = [vline(f) for p in self.plots.values() for f in p.figures]
         self.key = note("")
         self.clock = note("", width=220, sizing_mode=None)
         self._scene = None
-        player = pn.widgets.Player.from_param(pb.param.frame, start=0, end=Playback.FRAMES, loop_policy="once",
-                                              interval=pn.bind(lambda fps: int(1000 / fps), pb.param.fps),
-                                              show_value=False, show_loop_controls=False, width=420)
+        # (Panel 1.9's player sets its slider's value before its maximum when drawn, so a first value
+        # above 100 would show halfway: the animation opens at its start.)
+        player = pn.widgets.Player(name="Frame", start=0, end=Playback.FRAMES, value=pb.frame, loop_policy="once",
+                                   interval=int(1000 / pb.fps), show_value=False, show_loop_controls=False, width=420)
+        player.param.watch(lambda e: setattr(pb, "frame", e.new), "value")
+        pb.param.watch(lambda e: e.new != player.value and setattr(player, "value", e.new), "frame")
+        pb.param.watch(lambda e: setattr(player, "interval", int(1000 / e.new)), "fps")
         self.follow(self.study, "results")
         pb.param.watch(self._on_frame, "frame")
         return pn.Column(
             pn.Row(player, pn.widgets.Select.from_param(pb.param.fps, name="Speed", width=140), self.clock),
             self.key,
             grid(pane(self.orbit_fig), pane(self.loop.fig)),
-            grid(pane(self.energy.fig), pane(self.plots["area"].fig)),
+            grid(*[p.panel for p in self.plots.values()]),
             sizing_mode="stretch_width")
 
     def _on_frame(self, event):
@@ -83,10 +86,9 @@ class PlayView(FeatureView):
             self._scene = runs.scene
         i, j = phase_axes(runs.scene)[0][:2]
         self.orbits = {slot: zcols(c.run, i, j) for slot, c in comparisons(runs).items()}
-        for p in (self.faint, self.trace, self.now, self.loop, self.energy):
+        for p in (self.faint, self.trace, self.now, self.loop):
             p.colors(names(runs))
         self.faint.set({slot: path(*xy) for slot, xy in self.orbits.items()})
-        self.energy.set(over_time(runs, lambda c: (c.run.t, c.run.H_ext[:, 0])))
         update_plots(self.plots, runs)
         self.key.object = color_key(runs)
         self.frame()

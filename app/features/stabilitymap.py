@@ -28,7 +28,7 @@ MAP_MAX_STEPS = 200_000_000
 # First axes per scene: (x name, start, stop, log), (y name, start, stop, log).
 MAP_AXES = {
     "decaying": (("h", 0.05, 3.0, True), ("lam", 0.1, 5.0, False)),
-    "damped": (("h", 0.05, 3.0, True), ("gamma", -0.5, 0.5, False)),
+    "damped": (("h", 0.05, 3.0, True), ("gamma", -0.5, 0.5, False), "error_final"),
     "modulated": (("alpha", 0.5, 4.5, False), ("eps", 0.0, 0.8, False)),
     "charged": (("h", 0.001, 0.1, True), ("B0", 0.0, 2.0, False)),
     "kapitza": (("nu", 5.0, 80.0, False), ("a", 0.0, 0.5, False)),
@@ -42,9 +42,16 @@ def map_axes(scene):
     """The Stability map's first axes for a scene: its MAP_AXES entry, else h on a log axis around
     the scene's step by its first parameter that is not an initial condition, over its slider range."""
     if scene.name in MAP_AXES:
-        return MAP_AXES[scene.name]
+        return MAP_AXES[scene.name][:2]
     p = next(p for p in scene.params if not p.initial and not p.choices and not isinstance(p.default, str))
     return ("h", scene.h / 4, 8 * scene.h, True), (p.name, *soft_range(p), False)
+
+
+def first_measure(scene):
+    """What a scene's first map shows: growth, or the MAP_AXES entry's measure where growth says
+    nothing (the damped oscillator grows at γ/2 with every method: its error shows the methods apart)."""
+    entry = MAP_AXES.get(scene.name, ())
+    return entry[2] if len(entry) > 2 else "growth"
 
 
 def map_bytes(scene, points_steps, threads):
@@ -98,7 +105,8 @@ class StabilityMap(Job):
         if events and all(e.name == "method" for e in events) and {self.x, self.y} <= set(names):
             return
         (xn, x0, x1, xl), (yn, y0, y1, yl) = map_axes(self.study.scene_obj)
-        self.param.update(x=xn, x_start=x0, x_stop=x1, x_log=xl, y=yn, y_start=y0, y_stop=y1, y_log=yl)
+        self.param.update(x=xn, x_start=x0, x_stop=x1, x_log=xl, y=yn, y_start=y0, y_stop=y1, y_log=yl,
+                          measure=first_measure(self.study.scene_obj))
 
     def _inputs(self):
         s = self.study
@@ -279,6 +287,10 @@ class StabilityMapView(FeatureView):
 
         return pn.Column(self.text, pn.widgets.Select.from_param(m.param.measure, width=200), axis("x"), axis("y"),
                          row, status, self.box, self.failures, sizing_mode="stretch_width")
+
+    def first_shown(self):
+        if self.state.result is None and not self.state.running:
+            self.state.start()
 
     def update(self):
         m = self.state

@@ -3,9 +3,9 @@ rigorous checks. It shows the sidebar's comparison."""
 import pandas as pd
 import panel as pn
 
-from ..plotting import Pair, figure, grid, note, pane, table
+from ..plotting import Curves, grid, note, table
 from .base import Feature, FeatureView
-from .common import color_key, names, numbers, over_time
+from .common import color_key, comparisons, names, numbers
 from .orbits import NUMBERS_TEXT
 
 VOLUME_TEXT = ("<h4>Volume form</h4><p class='doc'>Left, the paper's estimator as printed: the determinant "
@@ -22,6 +22,7 @@ SYMPLECTIC_TEXT = ("<h4>Symplectic form</h4><p class='doc'>The paper's estimator
 
 # (title, value label, log axis, the series of a comparison)
 PLOTS = {
+    "energy": ("H~ = H + p_t", "H + p_t", False, lambda c: (c.run.t, c.run.H_ext[:, 0])),
     "paper_volume": ("paper's estimator: det[X¹ … X²ⁿ⁺¹]", "det[X1 ... X(2n+1)]", False,
                      lambda c: (c.run.t[1:], c.paper_volume)),
     "det": ("rigorous: |det M_k − 1|", "|det M - 1|", True, lambda c: (c.run.t[:-1], c.det_dev)),
@@ -34,29 +35,29 @@ PLOTS = {
 
 
 def time_plots(keys):
-    """{key: Pair} of the PLOTS named."""
-    return {k: Pair(figure(PLOTS[k][0], "t", PLOTS[k][1], logy=PLOTS[k][2])) for k in keys}
+    """{key: Curves} of the PLOTS named."""
+    return {k: Curves(PLOTS[k][0], "t", PLOTS[k][1], log=PLOTS[k][2]) for k in keys}
 
 
 def update_plots(plots, runs):
     for k, p in plots.items():
-        p.colors(names(runs))
-        p.set(over_time(runs, PLOTS[k][3], logy=PLOTS[k][2]))
+        get = PLOTS[k][3]
+        p.show({slot: get(c) for slot, c in comparisons(runs).items()}, names(runs))
 
 
 class StructureView(FeatureView):
     NAME = "structure"
 
     def layout(self):
-        self.plots = time_plots(PLOTS)
+        self.plots = time_plots([k for k in PLOTS if k != "energy"])
         self.key = note("")
         self.table = table(["quantity"])
         self.follow(self.study, "results")
         return pn.Column(
             self.key, note(VOLUME_TEXT),
-            grid(*[pane(self.plots[k].fig) for k in ("paper_volume", "det")]),
+            grid(*[self.plots[k].panel for k in ("paper_volume", "det")]),
             note(SYMPLECTIC_TEXT),
-            grid(*[pane(self.plots[k].fig) for k in ("paper_omega", "symp", "separation", "area")]),
+            grid(*[self.plots[k].panel for k in ("paper_omega", "symp", "separation", "area")]),
             note(NUMBERS_TEXT), self.table, sizing_mode="stretch_width")
 
     def update(self):

@@ -13,13 +13,13 @@ from ..plotting import FLOOR, SLOTS, Pair, figure, grid, note, pane, vline
 from ..study import Runs, comparison_bytes, failure_note, run_pair
 from .base import Feature, FeatureView, Follower
 from .cloud import Snapshots, loops
-from .common import color_key, names, over_time
+from .common import color_key
 from .structure import time_plots, update_plots
 
 SWEEP_THETAS = np.linspace(0.0, 1.0, 21)
 SWEEP_STEPS = 200
 METHODS = ("theta", "theta-naive")
-LESSON_THETA = 0.3
+LESSON_THETA = 0.3  # where the two methods differ (at 1/2 they are the same method)
 
 TEXT = ("<p>Both methods evaluate H at an intermediate point of each step. The <b>lifted</b> θ-method (the "
         "paper's cotangent lift) puts q at θ and p at 1 − θ: it is symplectic on every time slice <b>for every "
@@ -56,8 +56,10 @@ class ThetaLesson(Follower):
     KIND = "θ lesson"
     WHAT = "the θ lesson"
     HOLD = True
-    WATCHED = ("scene", "theta", "h", "T", "values")
-    results = param.ClassSelector(class_=Runs, doc="Lifted and naive runs at the study's θ.")
+    WATCHED = ("scene", "h", "T", "values")
+    theta = param.Number(default=LESSON_THETA, bounds=(0.0, 1.0), step=0.01, label="θ",
+                         doc="θ of both methods (they coincide at θ = 1/2).")
+    results = param.ClassSelector(class_=Runs, doc="Lifted and naive runs at the lesson's θ.")
     sweep = param.Dict(default=None, allow_None=True,
                        doc="'thetas', and per method name {'det': max |det M - 1|, 'symp': max |M^T J M - J|} "
                            "at each θ.")
@@ -66,14 +68,15 @@ class ThetaLesson(Follower):
         self._sweep_key = None
         self._shown = None
         super().__init__(study, **params)
+        self.param.watch(lambda e: self._on_study(), "theta")
 
     def _inputs(self):
         s = self.study
-        setups = tuple(Setup.make(s.scene, m, s.values, s.theta) for m in METHODS)
+        setups = tuple(Setup.make(s.scene, m, s.values, self.theta) for m in METHODS)
         s.check_horizon()
         key = (s.scene, tuple(sorted(s.values.items())), float(s.h))
         inputs = (s.scene, setups, float(s.h), float(s.T), key)
-        return None if (key, float(s.T), s.theta) == self._shown else inputs
+        return None if (key, float(s.T), self.theta) == self._shown else inputs
 
     def _bytes(self, inputs):
         return comparison_bytes(*inputs[1:4])
@@ -109,18 +112,17 @@ class ThetaView(FeatureView):
                                                ("symp", "max |M_kᵀ J M_k − J| over the first steps, against θ",
                                                 "max |M^T J M - J|"))}
         self.marks = [vline(p.fig) for p in self.sweeps.values()]
-        self.plots = time_plots(["det", "symp", "area"])
-        self.energy = Pair(figure("H~ = H + p_t", "t", "H + p_t"))
+        self.plots = time_plots(["det", "symp", "area", "energy"])
         self.snapshots = {slot: Snapshots(f"{label}: loop at t = 0 (light), T/4, T/2, 3T/4, T (dark)")
                           for slot, label in zip(("A", "B"), ("lifted", "naive"))}
         self.key = note("")
-        self.follow(lesson, "results", "sweep")
+        self.follow(lesson, "results", "sweep", "theta")
         return pn.Column(
             note(TEXT), self.key,
-            pn.widgets.FloatSlider.from_param(self.study.param.theta, sizing_mode="stretch_width"),
+            pn.widgets.FloatSlider.from_param(lesson.param.theta, sizing_mode="stretch_width"),
             note(SWEEP_TEXT),
             grid(*[pane(p.fig) for p in self.sweeps.values()]),
-            grid(*[pane(p.fig) for p in (*self.plots.values(), self.energy)]),
+            grid(*[p.panel for p in self.plots.values()]),
             grid(*[pane(s.fig) for s in self.snapshots.values()]),
             sizing_mode="stretch_width")
 
@@ -132,14 +134,12 @@ class ThetaView(FeatureView):
                 p.colors(METHODS)
                 p.set({slot: (sweep["thetas"], np.maximum(sweep[m][k], FLOOR)) for slot, m in zip(SLOTS, METHODS)})
         for mark in self.marks:
-            mark.location = self.study.theta
+            mark.location = lesson.theta
         if runs is None:
             return
         update_plots(self.plots, runs)
-        self.energy.colors(names(runs))
-        self.energy.set(over_time(runs, lambda c: (c.run.t, c.run.H_ext[:, 0])))
         loops(runs, self.snapshots)
         self.key.object = color_key(runs)
 
 
-FEATURE = Feature("theta", "Theta lesson", ThetaView, ThetaLesson)
+FEATURE = Feature("theta", "Theta lesson", ThetaView, ThetaLesson, url={"theta": "lesson_theta"})

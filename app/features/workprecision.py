@@ -124,24 +124,34 @@ class Measurement(Job):
 
 class WorkPrecision(Measurement):
     """Error at T against wall time for the chosen methods over step sizes (and scipy's
-    solve_ivp over tolerances), on the study's scene, parameters, θ and T. A cosymp point can be
-    opened in the Orbits view (`open_row`)."""
+    solve_ivp over tolerances), on the study's scene, parameters and θ, to this measurement's own
+    horizon T (the scene's paper horizon at first). A cosymp point can be opened in the Orbits
+    view (`open_row`)."""
 
     peers = param.Boolean(default=True, label="with scipy's solve_ivp (RK45, DOP853, LSODA)",
                           doc="Also measure scipy's adaptive solvers over tolerances 1e-3 ... 1e-12.")
+    T = param.Number(default=50.0, label="Horizon T", doc="The horizon every run is measured at.")
     KIND = "work–precision"
     DEFAULTS = wp.DEFAULT_METHODS
 
+    def __init__(self, study, **params):
+        params.setdefault("T", study.scene_obj.T)
+        super().__init__(study, **params)
+
+    def _on_scene(self, event):
+        super()._on_scene(event)
+        self.T = self.study.scene_obj.T
+
     def _inputs(self):
         s = self.study
-        wp.check_horizon(s.T)
-        first = math.ceil(s.T / s.scene_obj.time_scale)
+        T = wp.check_horizon(self.T)
+        first = math.ceil(T / s.scene_obj.time_scale)
         if first > WP_MAX_STEPS:
-            raise InputError(f"T = {s.T:g} takes at least {first} steps per run at the scene's time scale, beyond "
+            raise InputError(f"T = {T:g} takes at least {first} steps per run at the scene's time scale, beyond "
                              f"this view's {WP_MAX_STEPS} steps per run: shorten T (the long horizons below go "
                              "further at one h)")
         return Measured(s.scene, dict(s.values), float(s.theta), solvers_of(s.scene, self.methods, s.values, s.theta),
-                        T=float(s.T), peers=bool(self.peers))
+                        T=T, peers=bool(self.peers))
 
     def _describe(self, job):
         peers = ", scipy's RK45, DOP853, LSODA" if job.peers else ""
@@ -377,7 +387,8 @@ GROWTH_TEXT = ("<p class='doc'>Growth exponent: the slope of log(error) against 
                "ten times the reference's uncertainty, and the slope of log(max |H~|); 1 is linear growth, 2 "
                "quadratic, 0 bounded; – with fewer than three usable horizons. Grey: the slopes T and T² for "
                "comparison.</p>")
-WP_TEXT = ("<p>What each method costs for the accuracy it delivers, on the sidebar's scene, parameters, θ and T: "
+WP_TEXT = ("<p>What each method costs for the accuracy it delivers, on the sidebar's scene, parameters and θ, to "
+           "the horizon T set here (the scene's paper horizon at first): "
            "each of cosymp's methods over step sizes (refined by √2 until the error stops improving or a run "
            "reaches {steps} steps), and scipy's adaptive <code>solve_ivp</code> over tolerances 1e-3 … 1e-12 on "
            "the same extended ODE. Wall time: the best of repeated runs after an untimed warm-up (so no "
@@ -470,11 +481,12 @@ class WorkPrecisionView(FeatureView):
                                 self.targets, visible=False, **wide)
         self.long_box = pn.Column(*[pane(p.fig) for p in self.drift_plots], self.long_reference, note(GROWTH_TEXT),
                                   self.growth, visible=False, **wide)
-        self.follow(m, "rows")
+        self.follow(m, "rows", "running")
         self.follow(lh, "rows")
         return pn.Column(
             note(WP_TEXT.format(steps=f"{WP_MAX_STEPS:,}")),
-            pn.widgets.MultiChoice.from_param(m.param.methods, name="Methods", **wide),
+            pn.Row(pn.widgets.MultiChoice.from_param(m.param.methods, name="Methods", **wide),
+                   pn.widgets.FloatInput.from_param(m.param.T, width=140), **wide),
             pn.widgets.Checkbox.from_param(m.param.peers),
             wp_row, wp_status, self.wp_failed, self.wp_hint, self.wp_box,
             pn.layout.Divider(),
@@ -485,9 +497,14 @@ class WorkPrecisionView(FeatureView):
             long_row, long_status, self.long_failed, self.long_box,
             **wide)
 
+    def first_shown(self):
+        m = self.state.measure
+        if not m.rows and not m.running:
+            m.start()
+
     def update(self):
         m, lh = self.state.measure, self.state.long
-        self.wp_hint.visible = not m.rows
+        self.wp_hint.visible = not m.rows and not m.running
         self.wp_box.visible = bool(m.rows)
         self.long_box.visible = bool(lh.rows)
         self.wp_failed.object = failed_html(m.rows)

@@ -9,7 +9,8 @@ from ..integrate import Setup
 from ..scenes import SCENES, charged
 from ..study import compare, gauge_study
 from ..summary import long_envelopes
-from . import PALETTE, Figure, Report, Section, Series, Table
+from . import Figure, Report, Section, Series, Table
+from .style import GAUGE_COLORS, method_color
 
 SCHEME = "symplectic-euler"
 REFERENCE = "rk4"
@@ -21,7 +22,6 @@ OSCILLATORS = (
 )
 WP_SCENES = ("damped", "modulated")
 WP_METHODS = ("rk4", "rk8", "midpoint", "symplectic-euler", "gauss4", "gauss6")
-GAUGE_COLORS = dict(zip(charged.GAUGES, PALETTE))
 GAUGE_QUANTITIES = (("x", "q", 0), ("y", "q", 1), ("p_x", "p", 0), ("p_y", "p", 1), ("Π_x", "Pi", 0), ("Π_y", "Pi", 1))
 
 
@@ -72,19 +72,20 @@ def _oscillator(name, title, values, long_values, T_long, long, progress):
     text = [f"{scene.summary} Printed parameters: h = {scene.h:g}, T = {scene.T:g}"
             + "".join(f", {k} = {v:g}" for k, v in values.items()) + ".", *scene.notes]
     items = [
-        Figure("Extended Hamiltonian H + p_t", "t", "H + p_t", [Series(m, c.run.t, c.run.H_ext[:, 0]) for m, c in runs],
+        Figure("Extended Hamiltonian H + p_t", "t", "H + p_t", [Series(m, c.run.t, c.run.H_ext[:, 0], color=method_color(m)) for m, c in runs],
                caption="The paper's Fig. 'extended Hamiltonian': H + p_t is conserved by the exact flow (0 with "
                        "p_t(0) = −H(z0, 0)). The first-order symplectic scheme's H + p_t oscillates with an "
                        "amplitude set by h and does not grow; fourth-order RK4 errs less at first but drifts, which "
                        "shows over the long run below."),
         Figure("Symplectic form: the paper's estimator ω(X¹, X²)", "t", "ω(X¹, X²)",
-               [Series(m, c.run.t[1:], c.paper_omega) for m, c in runs],
+               [Series(m, c.run.t[1:], c.paper_omega, color=method_color(m)) for m, c in runs],
                caption="As printed: ω of the one-step increments X = z_(k+1) − z_k of two nearby trajectories "
                        f"(δ = {DELTA:g}). It follows the increments' size, not only the map's structure; the "
                        "rigorous check is below."),
         Figure("|det M_k − 1| and ||M_kᵀ J M_k − J|| (rigorous)", "t", "defect",
-               [Series(f"{m} |det M − 1|", c.run.t[:-1], c.det_dev) for m, c in runs]
-               + [Series(f"{m} ||MᵀJM − J||", c.run.t[:-1], c.symp_dev, dash=True) for m, c in runs], logy=True,
+               [Series(f"{m} |det M − 1|", c.run.t[:-1], c.det_dev, color=method_color(m)) for m, c in runs]
+               + [Series(f"{m} ||MᵀJM − J||", c.run.t[:-1], c.symp_dev, dash=True, color=method_color(m))
+                  for m, c in runs], logy=True,
                caption="The one-step tangent maps on the time slice: round-off for the symplectic scheme, not for RK4 "
                        "(exact zeros are not drawn on the log axis)."),
     ]
@@ -108,18 +109,18 @@ def _long_figures(name, values, T_long, progress):
     where = f"h = {scene.h:g}, T = {T_long:g}" + (f", {setting}" if setting else "")
     figs = [
         Figure(f"Volume form over the long run ({where}): the paper's estimator det[X¹ X² X³]", "t", "det",
-               [Series(f"{m} {side}", e["t"], e[f"vol_{side}"], dash=side == "min", color=PALETTE[i])
-                for i, (m, e) in enumerate(env.items()) for side in ("max", "min")],
+               [Series(f"{m} {side}", e["t"], e[f"vol_{side}"], dash=side == "min", color=method_color(m))
+                for m, e in env.items() for side in ("max", "min")],
                caption="The paper's volume-form figure: det of the increments in (q, t, p) of three nearby "
                        "trajectories, per-bin minimum (dashed) and maximum. It tracks the increments' size (the "
                        "orbit's growth for the damped oscillator as printed)."),
         Figure(f"Extended Hamiltonian over the long run ({where})", "t", "H + p_t",
-               [Series(f"{m} {side}", e["t"], e[f"H_{side}"], dash=side == "min", color=PALETTE[i])
-                for i, (m, e) in enumerate(env.items()) for side in ("max", "min")],
+               [Series(f"{m} {side}", e["t"], e[f"H_{side}"], dash=side == "min", color=method_color(m))
+                for m, e in env.items() for side in ("max", "min")],
                caption="Per-bin envelope of H + p_t: bounded for the symplectic scheme, drifting for RK4 (plus the "
                        "round-off of summing p_t over millions of steps)."),
         Figure(f"max |det M_k − 1| per bin over the long run ({where})", "t", "|det M_k − 1|",
-               [Series(m, e["t"], e["det"]) for m, e in env.items()], logy=True,
+               [Series(m, e["t"], e["det"], color=method_color(m)) for m, e in env.items()], logy=True,
                caption="The rigorous volume check over every step of the long run."),
     ]
     if failures:
@@ -172,7 +173,7 @@ def _work_precision(name, progress):
 
     def series(key):
         return [Series(s, [r["wall_s"] for r in rows if r["solver"] == s], [r[key] for r in rows if r["solver"] == s],
-                       dash=s.startswith("scipy"), points=True) for s in solvers]
+                       dash=s.startswith("scipy"), points=True, color=method_color(s)) for s in solvers]
 
     t = wp.targets(rows)
     costs = Table(["solver", "s to error 1e-6", "s to error 1e-9"],

@@ -30,9 +30,47 @@
     return out;
   }
 
-  function tick(v) {
+  /* Compact tick labels, as the app draws them: 4e-4, 1e5, 2500; ticks that differ only in late
+     digits as offsets from the middle one (1, +2e-16), so no two labels read the same. */
+  function trim(s) {
+    var parts = s.split("e"), m = parts[0];
+    if (m.indexOf(".") >= 0) m = m.replace(/0+$/, "").replace(/\.$/, "");
+    return parts.length > 1 ? m + "e" + parts[1].replace("+", "") : m;
+  }
+
+  function places(step) {  /* the decimals that write every multiple of step exactly */
+    for (var d = 0; d < 12; d++) {
+      var x = step * Math.pow(10, d);
+      if (Math.abs(x - Math.round(x)) < 1e-6 * x) return d;
+    }
+    return 12;
+  }
+
+  function compact(v, step, exp) {
+    if (v === 0 || (step > 0 && Math.abs(v) < 1e-9 * step)) return "0";
     var a = Math.abs(v);
-    return (a !== 0 && (a < 1e-3 || a >= 1e5)) ? v.toExponential(2) : String(parseFloat(v.toPrecision(4)));
+    if (!exp) return trim(v.toFixed(step > 0 ? places(step) : 3));
+    var e = step > 0 ? Math.floor(Math.log10(step)) : 0;
+    var mantissa = step > 0 ? Math.min(2, places(step / Math.pow(10, e))) : 2;
+    var digits = step > 0 ? Math.max(1, Math.min(15, Math.floor(Math.log10(a)) - e + 1 + mantissa)) : 3;
+    return trim(v.toExponential(digits - 1));
+  }
+
+  function ticks(vals) {
+    var finite = vals.filter(function (v) { return v != null && isFinite(v); });
+    if (!finite.length) return vals.map(function () { return ""; });
+    var lo = Math.min.apply(null, finite), hi = Math.max.apply(null, finite), span = hi - lo;
+    var big = Math.max(Math.abs(lo), Math.abs(hi)), step = finite.length > 1 ? span / (finite.length - 1) : 0;
+    var ref = finite[Math.floor(finite.length / 2)], offset = span > 0 && span < 1e-4 * big;
+    var nonzero = finite.map(Math.abs).filter(function (a) { return a > 1e-9 * step; });
+    var exp = big >= 1e5 || (nonzero.length > 0 && Math.min.apply(null, nonzero) < 1e-3);  /* one form per axis */
+    return vals.map(function (v) {
+      if (v == null) return "";
+      if (!offset) return compact(v, step, exp);
+      if (v === ref) return trim(Math.abs(v) >= 1e5 || Math.abs(v) < 1e-3 ? v.toExponential(11) : v.toPrecision(12));
+      var d = Math.abs(v - ref);
+      return (v > ref ? "+" : "\u2212") + compact(d, step, d >= 1e5 || d < 1e-3);
+    });
   }
 
   function axis(label, log, vertical) {
@@ -44,7 +82,7 @@
       };
     } else {
       a.splits = steps;
-      a.values = function (u, vals) { return vals.map(function (v) { return v == null ? "" : tick(v); }); };
+      a.values = function (u, vals) { return ticks(vals); };
     }
     if (vertical) {
       /* wide enough for the longest tick label, plus the axis label */

@@ -3,10 +3,11 @@ import shlex
 
 import numpy as np
 
-from ..diagnostics import distance
+from ..diagnostics import distance, norm
 from ..reference import reference_final
 from ..study import compare_until_failure
 from . import Figure, Report, Section, Series, Table
+from .style import pair_colors
 
 DELTA = 1e-4
 CLOUD_POINTS = 32
@@ -45,15 +46,15 @@ def scene_report(setups, h, T, cmd, progress=None, computed=None):
         err = None
         if c is not None and c.error is None and not failure:
             z_ref, _ = reference_final(s, h, T)
-            err = float(distance(c.run.z[-1, 0], z_ref[0]))
+            err = float(distance(c.run.z[-1, 0], z_ref[0]) / max(float(norm(z_ref[0])), np.finfo(float).tiny))
         runs.append((s, c, failure, err))
     report(total, total, "done")
     params = Table(["parameter", "value", "meaning"],
                    [[p.name, setups[0].values[p.name], p.doc] for p in scene.params], caption="Parameters")
-    numbers = Table(["method", "max |H + p_t|", "max |det M_k − 1|", "max ||MᵀJM − J||", "final error", "steps",
+    numbers = Table(["method", "max |H + p_t|", "max |det M_k − 1|", "max ||MᵀJM − J||", "final relative error", "steps",
                      "integration time (s)", "stopped"],
                     [_numbers(s, c, failure, err) for s, c, failure, err in runs],
-                    caption="Figures over every step (final error against "
+                    caption="Figures over every step (final relative error |z − z_ref| / |z_ref| against "
                             + ("the exact flow" if scene.has_flow else "rk8 at a fine step")
                             + "; integration time of the run with its nearby trajectories)")
     ok = [(s, c) for s, c, _, _ in runs if c is not None]
@@ -77,36 +78,42 @@ def _numbers(s, c, failure, err):
     if c is None:
         return [s.method.label(s.theta), np.nan, np.nan, np.nan, np.nan, 0, np.nan, failure]
     n = c.summary
-    final = n["final error"] if n["final error"] is not None else (np.nan if err is None else err)
+    final = n["final relative error"] if n["final relative error"] is not None else (np.nan if err is None else err)
     return [s.method.label(s.theta), n["max |H + p_t|"], n["max |det M - 1|"], n["max |M^T J M - J|"], final, n["steps"],
             c.run.wall_s, failure or "no"]
 
 
+def _series(runs, get):
+    """One Series per method of get(comparison) -> (x, y), in the methods' colours (the second dashed)."""
+    colors = pair_colors(*[st.method.name for st, _ in runs], *([""] if len(runs) < 2 else []))
+    return [Series(st.method.label(st.theta), *get(c), dash=i == 1, color=color)
+            for i, ((st, c), color) in enumerate(zip(runs, colors))]
+
+
 def _orbit_figures(scene, runs):
-    figs = []
-    if scene.name == "charged":
-        figs.append(Figure("Orbit in the plane", "x", "y", [Series(s.method.label(s.theta), c.run.q[:, 0, 0], c.run.q[:, 0, 1])
-                                                            for s, c in runs], parametric=True))
+    if scene.ndof > 1:
+        a, b = scene.coordinates[:2]
+        figs = [Figure(f"Orbit in the ({a}, {b}) plane", a, b, _series(runs, lambda c: (c.run.q[:, 0, 0], c.run.q[:, 0, 1])),
+                       parametric=True)]
     else:
-        figs.append(Figure("Phase portrait", "q", "p", [Series(s.method.label(s.theta), c.run.q[:, 0, 0], c.run.p[:, 0, 0])
-                                                        for s, c in runs], parametric=True))
-    figs.append(Figure("Extended Hamiltonian H + p_t", "t", "H + p_t",
-                       [Series(s.method.label(s.theta), c.run.t, c.run.H_ext[:, 0]) for s, c in runs]))
+        figs = [Figure("Phase portrait", "q", "p", _series(runs, lambda c: (c.run.q[:, 0, 0], c.run.p[:, 0, 0])),
+                       parametric=True)]
+    figs.append(Figure("Extended Hamiltonian H + p_t", "t", "H + p_t", _series(runs, lambda c: (c.run.t, c.run.H_ext[:, 0]))))
     if all(c.error is not None for _, c in runs):
-        figs.append(Figure("Error against the exact flow", "t", "|z − z_exact|",
-                           [Series(s.method.label(s.theta), c.run.t, c.error) for s, c in runs], logy=True))
+        figs.append(Figure("Relative error against the exact flow", "t", "|z − z_exact| / |z_exact|",
+                           _series(runs, lambda c: (c.run.t, c.error)), logy=True))
     return figs
 
 
 def _structure_figures(runs):
     return [
         Figure("|det M_k − 1| of the one-step maps", "t", "|det M_k − 1|",
-               [Series(s.method.label(s.theta), c.run.t[:-1], c.det_dev) for s, c in runs], logy=True,
+               _series(runs, lambda c: (c.run.t[:-1], c.det_dev)), logy=True,
                caption="Exact zeros are not drawn on the log axis."),
         Figure("||M_kᵀ J M_k − J|| of the one-step maps", "t", "symplecticity defect",
-               [Series(s.method.label(s.theta), c.run.t[:-1], c.symp_dev) for s, c in runs], logy=True),
+               _series(runs, lambda c: (c.run.t[:-1], c.symp_dev)), logy=True),
         Figure("The paper's symplectic-form estimator ω(X¹, X²)", "t", "ω(X¹, X²)",
-               [Series(s.method.label(s.theta), c.run.t[1:], c.paper_omega) for s, c in runs]),
+               _series(runs, lambda c: (c.run.t[1:], c.paper_omega))),
         Figure("The paper's volume-form estimator det[X¹ X² X³]", "t", "det",
-               [Series(s.method.label(s.theta), c.run.t[1:], c.paper_volume) for s, c in runs]),
+               _series(runs, lambda c: (c.run.t[1:], c.paper_volume))),
     ]

@@ -209,17 +209,17 @@ def gauge_map(P, t, q, p, pt, inverse=False):
 SCENE = ChargedScene(
     name="charged",
     title="Charged particle in a time-dependent field, five gauges",
-    summary="H = |p - e A(q,t)|^2/(2m) + e phi(q,t) in the plane, A = beta(t)(x - y, x + y), "
-            "phi = 0 in the original gauge; beta(t) = B0 (1 + eps sin(w t)) in the paper.",
-    look_for="q and the mechanical momentum Pi = p - eA agree across gauges (to the method's "
-             "order for per-gauge runs, to round-off for transported maps); the canonical "
-             "momentum p does not. Boris gives the same q and Pi in every gauge.",
-    equations=(r"H = \frac{1}{2m}\big|p - eA(q,t)\big|^2 + e\,\phi(q,t)",
+    summary="H = |p − e A(q, t)|²/(2m) + e φ(q, t) in the plane, A = β(t) (x − y, x + y), φ = 0 in the "
+            "original gauge; β(t) = B₀ (1 + ε sin(ωt)) in the paper.",
+    look_for="q and the mechanical momentum Π = p − eA agree across gauges (to the method's order for per-gauge "
+             "runs, to round-off for transported maps); the canonical momentum p does not. Boris gives the same q "
+             "and Π in every gauge.",
+    equations=(r"H = \frac{1}{2m}\left|\,p - eA(q,t)\,\right|^2 + e\,\phi(q,t)",
                (r"A = \beta(t)\,(x-y,\;x+y),\quad \phi = 0,\quad B = 2\beta(t)\,e_z,\quad "
                r"E = -\dot\beta(t)\,(x-y,\;x+y)"),
-               (r"A' = A + \nabla\chi,\quad \phi' = \phi - \partial_t\chi,\quad "
+               (r"A^{\prime} = A + \nabla\chi,\quad \phi^{\prime} = \phi - \partial_t\chi,\quad "
                r"G_\chi(q,p,t,p_t) = (q,\,p+e\nabla\chi,\,t,\,p_t+e\,\partial_t\chi)"),
-               r"\beta(t) = B_0\,(1+\varepsilon\sin\omega t)"),
+               r"\beta(t) = B_0\,\big(1+\varepsilon\,\sin(\omega t)\big)"),
     params=(
         Param("m", 1.0, "mass m", (1e-3, 1e3)),
         Param("e", 1.0, "charge e", (-1e3, 1e3)),

@@ -66,11 +66,11 @@ def flow(P, t0, t1, z):
 SCENE = Scene(
     name="damped",
     title="Damped oscillator (Caldirola-Kanai, as printed)",
-    summary="H = e^{gamma t} p^2/(2m) + e^{-gamma t} m w0 q^2/2, the paper's Sec. 4.1 with its "
-            "parameters. As printed it gives q'' - gamma q' + w0 q = 0.",
-    look_for="With the paper's sign, gamma > 0 makes q grow like e^{gamma t/2} while p decays "
-             "like e^{-gamma t/2}; gamma < 0 is the usual damping of q. H + p_t oscillates "
-             "boundedly for the structure-preserving methods and drifts for RK4 over long runs.",
+    summary="H = e^(γt) p²/(2m) + e^(−γt) m ω₀ q²/2, the paper's Sec. 4.1 with its parameters. As printed "
+            "it gives q″ − γ q′ + ω₀ q = 0.",
+    look_for="With the paper's sign, γ > 0 makes q grow like e^(γt/2) while p decays like e^(−γt/2); γ < 0 is "
+             "the usual damping of q. H + p_t oscillates boundedly for the structure-preserving methods and drifts "
+             "for RK4 over long runs.",
     equations=(r"H(q,p,t) = \frac{e^{\gamma t}}{2m}\,p^2 + \frac{m\,\omega_0}{2}\,e^{-\gamma t} q^2",
                (r"\dot q = \frac{e^{\gamma t}}{m} p,\quad \dot p = -m\omega_0 e^{-\gamma t} q,\quad "
                r"\dot p_t = -\frac{\gamma e^{\gamma t}}{2m}p^2 + \frac{\gamma m\omega_0}{2} e^{-\gamma t} q^2"),

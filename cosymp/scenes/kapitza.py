@@ -43,12 +43,12 @@ def dhdt(P, C, r, z):
 SCENE = Scene(
     name="kapitza",
     title="Kapitza's pendulum (vertically driven pivot)",
-    summary="H = p^2/2 - (w0^2 - a nu^2 cos(nu t)) cos q, lengths in units of the pendulum's, "
-            "q measured from the downward vertical. Nonlinear: the implicit methods iterate Newton.",
-    look_for="For a nu > sqrt(2) w0 (and nu >> w0) the inverted position q = pi becomes stable: "
-             "start near q = pi and watch the pendulum stay up, wobbling at the drive frequency.",
-    equations=(r"H(q,p,t) = \tfrac12 p^2 - \big(\omega_0^2 - a\nu^2\cos\nu t\big)\cos q",
-               (r"\dot q = p,\quad \dot p = -\big(\omega_0^2 - a\nu^2\cos\nu t\big)\sin q,\quad "
+    summary="H = p²/2 − (ω₀² − a ν² cos(νt)) cos q, lengths in units of the pendulum's, q measured from the "
+            "downward vertical. Nonlinear: the implicit methods iterate Newton.",
+    look_for="For a ν > √2 ω₀ (and ν ≫ ω₀) the inverted position q = π becomes stable: start near q = π and "
+             "watch the pendulum stay up, wobbling at the drive frequency.",
+    equations=(r"H(q,p,t) = \tfrac12 p^2 - \big(\omega_0^2 - a\nu^2\cos(\nu t)\big)\cos q",
+               (r"\dot q = p,\quad \dot p = -\big(\omega_0^2 - a\nu^2\cos(\nu t)\big)\sin q,\quad "
                r"\dot p_t = -a\nu^3\sin(\nu t)\cos q"),
                r"a\,\nu > \sqrt2\,\omega_0 \;\Rightarrow\; q=\pi \text{ stable (Kapitza)}"),
     params=(

@@ -23,13 +23,12 @@ def coef(P, t, C, r):
 SCENE = Scene(
     name="modulated",
     title="Oscillator with time-dependent potential",
-    summary="H = ((1 + eps sin(alpha t)) q^2 + p^2)/2, the paper's Sec. 4.2 with eps = 0.0035, "
-            "alpha = 0.0008.",
-    look_for="A slowly modulated stiffness: the structure-preserving methods keep H + p_t "
-             "oscillating around 0; RK4's H + p_t drifts away over the long (2e5) horizon. "
-             "Large eps with alpha near 2 (or 1, 2/3, ...) puts it in a Mathieu resonance tongue.",
-    equations=(r"H(q,p,t) = \tfrac12\big((1+\varepsilon\sin\alpha t)\,q^2 + p^2\big)",
-               (r"\dot q = p,\quad \dot p = -(1+\varepsilon\sin\alpha t)\,q,\quad "
+    summary="H = ((1 + ε sin(αt)) q² + p²)/2, the paper's Sec. 4.2 with ε = 0.0035, α = 0.0008.",
+    look_for="A slowly modulated stiffness: the structure-preserving methods keep H + p_t oscillating around 0; "
+             "RK4 loses energy at every step, so its H + p_t drifts away and its orbit spirals in. Large ε with α "
+             "near 2 (or 1, 2/3, ...) puts it in a Mathieu resonance tongue.",
+    equations=(r"H(q,p,t) = \tfrac12\big((1+\varepsilon\,\sin(\alpha t))\,q^2 + p^2\big)",
+               (r"\dot q = p,\quad \dot p = -(1+\varepsilon\,\sin(\alpha t))\,q,\quad "
                r"\dot p_t = -\tfrac12\alpha\varepsilon\cos(\alpha t)\,q^2")),
     params=(
         Param("eps", 0.0035, "modulation depth eps of the stiffness", (-10.0, 10.0)),
