@@ -56,7 +56,9 @@ def setup(scene, method, theta=None, **values):
     return Setup.make(scene, method, values or None, theta)
 
 
-# The browser tests' server, browser and page (served.py), one server and browser per session.
+# The browser tests' server, browser and page (served.py): one server per session, one browser per
+# module. Playwright's sync API keeps its event loop running while it is open, so a session-wide
+# browser would break every later test that runs a loop of its own (asyncio.run, Panel's callbacks).
 
 
 @pytest.fixture(scope="session")
@@ -68,7 +70,7 @@ def server():
         yield url
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def browser():
     from playwright.sync_api import sync_playwright
     from served import CHROMIUM, CHROMIUM_ARGS
