@@ -1,12 +1,13 @@
 """The cosymp app: one page per browser session, composed from the registry of features.
 
 Serve it with `panel serve app --setup app/warmup.py` (app/warmup.py makes the compiled kernels
-ready first). Everything is served from this server: the Bootstrap template, KaTeX, Tabulator and
+ready first). Everything is served from this server: the Bootstrap template, KaTeX and
 BokehJS come from Panel's and Bokeh's bundled resources.
 """
 import html
 import io
 from pathlib import Path
+from urllib.parse import parse_qsl, urlencode
 
 import panel as pn
 import param
@@ -47,7 +48,8 @@ class App(param.Parameterized):
         log_when_freed(self)
         self._pending = []
         self._stopped = False
-        query = pn.state.location.query_params if pn.state.location is not None else {}
+        # The raw query text (Panel's query_params turns numbers and JSON into values already).
+        query = dict(parse_qsl(pn.state.location.search.lstrip("?"))) if pn.state.location is not None else {}
         self.study = self._study(query)
         self.states = {f.name: f.state(self.study) if f.state else None for f in FEATURES}
         for f in (f for f in FEATURES if f.url):
@@ -131,7 +133,7 @@ class App(param.Parameterized):
         items = query_items(self.study.state(), URL_NAMES)
         for f in FEATURES:
             items.update(query_items({k: getattr(self.states[f.name], k) for k in f.url}, f.url))
-        pn.state.location.update_query(**items)
+        pn.state.location.search = "?" + urlencode(items)
 
     def _flush(self):
         """On load: write the state into the URL and post the messages of the session's start."""
@@ -165,6 +167,6 @@ class App(param.Parameterized):
         )
 
 
-pn.extension("katex", "tabulator", notifications=True, design="bootstrap")
+pn.extension("katex", notifications=True, design="bootstrap")
 pn.state.notifications.position = "bottom-left"  # over the sidebar's lower part, not over the plots
 App().template().servable(title="cosymp")
