@@ -25,6 +25,8 @@ from cosymp.errors import InputError, RunError
 
 from . import memory
 
+PROGRESS_S = 0.25  # progress reaches the page at most this often
+
 # What a computation may raise besides cosymp's own errors (InputError is a ValueError, RunError a
 # RuntimeError): each becomes a message and the session goes on.
 FAILURES = (ArithmeticError, AttributeError, LookupError, MemoryError, OSError, RuntimeError, TypeError,
@@ -98,25 +100,30 @@ class Run:
             self._signal()
 
     async def wait(self, on_progress, on_partial, interval=0.0):
-        """Start the thread and relay its reports on this loop until it ends: every progress
-        report, and the latest partial result at most once per `interval` seconds (and the last
-        one at the end)."""
+        """Start the thread and relay its reports on this loop until it ends: the latest progress
+        report at most once per PROGRESS_S seconds (each one costs the page a layout of the whole
+        document: a sweep reporting every cell froze the browser), and the latest partial result
+        at most once per `interval` seconds (and the last of each at the end)."""
         loop = asyncio.get_running_loop()
         woken = asyncio.Event()
         self._wake = lambda: loop.call_soon_threadsafe(woken.set)
         self.thread.start()
-        shown, drawn = None, -math.inf
+        shown, drawn, told = None, -math.inf, -math.inf
         while True:
-            wait = max(0.0, drawn + interval - time.perf_counter()) if self.partial is not None else None
+            now = time.perf_counter()
+            waits = [max(0.0, drawn + interval - now)] if self.partial is not None else []
+            if self.latest != shown:
+                waits.append(max(0.0, told + PROGRESS_S - now))
             try:
-                await asyncio.wait_for(woken.wait(), wait)
+                await asyncio.wait_for(woken.wait(), min(waits, default=None))
             except TimeoutError:
                 pass
             woken.clear()
             ended = self.finished.is_set()  # read first: what was reported before the end is read below
-            if self.latest != shown:
+            if self.latest != shown and (ended or time.perf_counter() >= told + PROGRESS_S):
                 shown = self.latest
                 on_progress(*shown)
+                told = time.perf_counter()
             if self.partial is not None and (ended or time.perf_counter() >= drawn + interval):
                 partial, self.partial = self.partial, None
                 on_partial(self.inputs, partial)

@@ -320,11 +320,14 @@ def swatch(color, label, dashed=False):
 
 
 def table(columns, **kw):
-    """A read-only table widget of the given columns."""
+    """A read-only table of the given columns (set its `object` to a DataFrame): a plain HTML table
+    written and escaped by pandas. Not Panel's Tabulator: in Panel 1.9 its resize handling can spin
+    forever once new data arrives below other models (the page froze when work-precision finished),
+    and it costs the browser far more per update."""
     import pandas as pd
 
-    return pn.widgets.Tabulator(pd.DataFrame(columns=columns), disabled=True, show_index=False, layout="fit_data",
-                                sizing_mode="stretch_width", **kw)
+    return pn.pane.DataFrame(pd.DataFrame(columns=columns), index=False, escape=True, border=0,
+                             stylesheets=[stylesheet()], **{"sizing_mode": "stretch_width", **kw})
 
 
 def fmt(v, digits=3):

@@ -99,7 +99,7 @@ class OrbitsView(FeatureView):
                 "<code>cosymp run</code> measures the error at T against a fine RK8 reference).</p>")
         figs.update(runs)
         self.key.object = color_key(runs) + verdict(runs)
-        self.table.value = pd.DataFrame(numbers(runs))
+        self.table.object = pd.DataFrame(numbers(runs))
 
 
 FEATURE = Feature("compare", "Orbits", OrbitsView)

@@ -66,7 +66,7 @@ class StructureView(FeatureView):
             return
         update_plots(self.plots, runs)
         self.key.object = color_key(runs)
-        self.table.value = pd.DataFrame(numbers(runs))
+        self.table.object = pd.DataFrame(numbers(runs))
 
 
 FEATURE = Feature("structure", "Structure", StructureView)

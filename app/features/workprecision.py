@@ -267,7 +267,7 @@ class Curves:
     def __init__(self, fig):
         self.fig = fig
         self.lines = {}
-        self.legend = None
+        self.legend = legend_outside(fig, [])  # built with the figure: one added later has no view
 
     def set(self, curves):
         """curves: {label: (x, y, dashed, solver)} drawn in the solver's colour; every other curve
@@ -282,11 +282,7 @@ class Curves:
             src, r = self.lines[label]
             r.glyph.update(line_color=method_color(solver), line_dash="dashed" if dashed else "solid")
             src.data = {"x": np.asarray(x, float), "y": np.asarray(y, float)}
-        items = [(label, [self.lines[label][1]]) for label in curves]
-        if self.legend is None:
-            self.legend = legend_outside(self.fig, items)
-        else:
-            self.legend.items = [LegendItem(label=label, renderers=rs) for label, rs in items]
+        self.legend.items = [LegendItem(label=label, renderers=[self.lines[label][1]]) for label in curves]
 
 
 class WorkPrecisionPlot:
@@ -513,12 +509,12 @@ class WorkPrecisionView(FeatureView):
             for p in self.wp_plots:
                 p.set(m.rows)
             self.wp_reference.object = reference_html(m.rows)
-            self.targets.value = pd.DataFrame(targets_table(m.rows))
+            self.targets.object = pd.DataFrame(targets_table(m.rows))
         if lh.rows:
             for p in self.drift_plots:
                 p.set(lh.rows)
             self.long_reference.object = reference_html(lh.rows)
-            self.growth.value = pd.DataFrame(growth_table(lh.rows))
+            self.growth.object = pd.DataFrame(growth_table(lh.rows))
 
 
 class Measurements:
