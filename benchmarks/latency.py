@@ -46,15 +46,16 @@ Playwright round trips do not enter the numbers):
 * Before each input the page must be quiet (no counted event for 600 ms after the last paint, no
   view building), else the measurement is reported as not quiet.
 
-Actions: a fresh page (navigation to first plot drawn / settled), the scene changed to each scene
-and back to damped, the method changed (midpoint -> gauss4 -> symplectic-euler -> midpoint), the
-gamma slider dragged (first move to first change, last move to settled), θ moved by 20 ArrowRight
-presses with the Lifted theta-method (first press to both), the first visit of each tab on a
-fresh page, and a load: ten pages each move gamma by one key press at most every 2 s (closed loop:
-a move waits until the page's previous move settled, so each latency belongs to one move and a
-slow server gets fewer moves) for 60 s while an eleventh page runs a long run to T = 3e6; its
-progress bar (a <progress>) is read every 5 s and its counted events are kept (the run redraws its
-plots as chunks arrive).
+Actions: a fresh page at the app's own first view (navigation to first plot drawn / settled), then
+on a page opened at ?scene=damped: the scene changed to each scene and back to damped, the method
+changed (midpoint -> gauss4 -> symplectic-euler -> midpoint), the gamma slider dragged (first move
+to first change, last move to settled), θ moved by 20 ArrowRight presses with the Lifted theta-
+method (first press to both); the first visit of each tab on a fresh page at the first view; and a
+load: ten damped pages each move gamma by one key press at most every 2 s (closed loop: a move waits
+until the page's previous move settled, so each latency belongs to one move and a slow server gets
+fewer moves) for 60 s while an eleventh page runs a long run to T = 3e6; its progress bar (a
+<progress>) is read every 5 s and its counted events are kept (the run redraws its plots as chunks
+arrive).
 
 Widgets are found by their visible label text, not by the app's classes: the nearest <select> or
 role=slider element to a visible element whose whole text is the label (or "label: value"), the
@@ -94,7 +95,7 @@ QUIET_TIMEOUT_MS = 60_000    # waiting for a quiet page before an input
 CONFIRM_MS = 2_000           # settled: no counted event for this long after the last one's paint
 HOT_MS = 5_000               # new plots are looked for every frame this long after models came
 
-SCENE_HOME = "damped"
+SCENE_HOME = "damped"        # interactions and the load start here (?scene=damped; the first view may differ)
 # Scene -> text its option shows (lower case; the key itself matches an option value or text too).
 SCENES = {"decaying": ["decaying"], "modulated": ["modulated", "time-dependent potential"],
           "charged": ["charged"], "kapitza": ["kapitza"], "damped": ["damped"]}
@@ -113,12 +114,12 @@ LOAD_MOVE_TIMEOUT_MS = 60_000
 LOAD_POLL_S = 0.25           # how often a page with a move under way is asked whether it settled
 LOAD_PROGRESS_EVERY_S = 5.0
 LONG_RECENT_S = 10           # the long run counts as progressing if its page got plot events this recently
-LONG_QUERY = {"view": "long", "T_long": "3e6", "p": json.dumps({"gamma": 0.0002}, separators=(",", ":"))}
+LONG_QUERY = {"scene": SCENE_HOME, "view": "long", "T_long": "3e6", "p": json.dumps({"gamma": 0.0002}, separators=(",", ":"))}
 
 # Installed in every page before its scripts run (see the module docstring).
 INSTRUMENT_JS = """(() => {
   if (window.__latency) return;
-  const QUIET = %(quiet)d, CONFIRM = %(confirm)d, HOT = %(hot)d;
+  const QUIET = QUIET_MS, CONFIRM = CONFIRM_MS, HOT = HOT_MS;
   const VISIBLE = {visibilityProperty: true, opacityProperty: true};
   const PART_NAMES = ["DataSource", "CDSView", "Plot", "Renderer", "Glyph", "Range", "Scale", "Ticker",
                       "TickFormatter", "ColorMapper"];
@@ -208,7 +209,7 @@ INSTRUMENT_JS = """(() => {
     const nested = [];
     for (let i = 0; i < n; i += stride) {
       const x = col[i];
-      if (typeof x === "number") sum += Number.isFinite(x) ? x * (1 + (i %% 7)) : 1;
+      if (typeof x === "number") sum += Number.isFinite(x) ? x * (1 + (i % 7)) : 1;
       else if (x != null && typeof x === "object" && nested.length < 4) nested.push(digest(x));
       else sum += String(x).length;
     }
@@ -291,7 +292,7 @@ INSTRUMENT_JS = """(() => {
       await sleep(20);
     }
   };
-})();""" % {"quiet": QUIET_MS, "confirm": CONFIRM_MS, "hot": HOT_MS}
+})();""".replace("QUIET_MS", str(QUIET_MS)).replace("CONFIRM_MS", str(CONFIRM_MS)).replace("HOT_MS", str(HOT_MS))
 
 # The visible element matching `selector` nearest to a visible element whose whole (light-DOM)
 # text matches `pattern`: fewest steps up from both to a common ancestor, across shadow roots.
@@ -371,8 +372,12 @@ def free_port():
 def served(repo):
     """`panel serve app --setup app/warmup.py` from repo on a free port; yields the app's URL."""
     port = free_port()
-    log = tempfile.NamedTemporaryFile("w", prefix="latency-server-", suffix=".log", delete=False)
     env = {**os.environ, "PYTHONPATH": str(repo)}
+    with tempfile.NamedTemporaryFile("w", prefix="latency-server-", suffix=".log", delete=False) as log:
+        yield from _serving(repo, port, env, log)
+
+
+def _serving(repo, port, env, log):
     proc = subprocess.Popen([sys.executable, "-m", "panel", "serve", "app", "--setup", "app/warmup.py",
                              "--address", "127.0.0.1", "--port", str(port),
                              "--allow-websocket-origin", f"127.0.0.1:{port}", "--liveness"],
@@ -399,7 +404,6 @@ def served(repo):
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait(timeout=15)
-        log.close()
 
 
 def revision(repo):
@@ -507,6 +511,25 @@ def drag_moves(inputs):
 # ---------------------------------------------------------------------------- actions
 
 
+def home(url):
+    return url + "?" + urllib.parse.urlencode({"scene": SCENE_HOME})
+
+
+def start_long_run(page, timeout_s=60):
+    """Wait until the long run is running; press its Start button only if the app did not start it
+    when the tab was first shown (the app before issue 15 waited for the press)."""
+    start = page.locator("button", has_text="Start long run")
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if page.get_by_text("running").count():
+            return
+        if start.count() and start.first.is_enabled():
+            start.first.click()
+            return
+        page.wait_for_timeout(250)
+    raise RuntimeError("the long run neither started by itself nor offered an enabled Start button")
+
+
 def run_first_page(browser, url, repeats, record):
     for r in range(repeats):
         context, _, load = open_page(browser, url)
@@ -517,19 +540,19 @@ def run_first_page(browser, url, repeats, record):
 def run_interactions(browser, url, repeats, record):
     """Per repeat, on one fresh page: every scene and back, the methods, the gamma drag, θ keys."""
     for r in range(repeats):
-        context, page, _ = open_page(browser, url)
+        context, page, _ = open_page(browser, home(url))
         try:
             for scene in [s for s in SCENES if s != SCENE_HOME]:
                 for target in (scene, SCENE_HOME):
                     attempt(page, record, "scene", target, r,
-                            lambda: measure(page, choose(page, "Scene", target, SCENES[target]),
-                                            first_of("input")))
+                            lambda page=page, target=target: measure(
+                                page, choose(page, "Scene", target, SCENES[target]), first_of("input")))
             for method in METHOD_SEQUENCE:
                 attempt(page, record, "method", method, r,
-                        lambda: measure(page, choose(page, "Method", method, METHODS[method]),
-                                        first_of("input")))
-            attempt(page, record, "drag gamma", "", r, lambda: drag(page, "gamma"))
-            attempt(page, record, f"theta x{THETA_PRESSES} keys", "", r, lambda: theta_keys(page))
+                        lambda page=page, method=method: measure(
+                            page, choose(page, "Method", method, METHODS[method]), first_of("input")))
+            attempt(page, record, "drag gamma", "", r, lambda page=page: drag(page, "gamma"))
+            attempt(page, record, f"theta x{THETA_PRESSES} keys", "", r, lambda page=page: theta_keys(page))
         finally:
             context.close()
 
@@ -580,7 +603,8 @@ def run_tabs(browser, url, repeats, record):
             context, page, _ = open_page(browser, url)
             try:
                 attempt(page, record, "tab", name, r,
-                        lambda: measure(page, tab(page, name).click, first_of("pointerdown")))
+                        lambda page=page, name=name: measure(page, tab(page, name).click,
+                                                             first_of("pointerdown")))
             finally:
                 context.close()
 
@@ -627,12 +651,12 @@ def run_load(browser, url):
     try:
         movers = []
         for _ in range(LOAD_PAGES):
-            context, page, _ = open_page(browser, url)
+            context, page, _ = open_page(browser, home(url))
             contexts.append(context)
             movers.append(Mover(page))
         long_context, long_page, _ = open_page(browser, url + "?" + urllib.parse.urlencode(LONG_QUERY))
         contexts.append(long_context)
-        long_page.get_by_role("button", name="Start long run").click()
+        start_long_run(long_page)
         long_page.wait_for_timeout(2000)
         long_mark = long_page.evaluate("() => performance.now()")
         t0 = time.monotonic()
@@ -646,7 +670,8 @@ def run_load(browser, url):
             if now >= next_progress:
                 progress.append((round(now - t0, 1), long_page.evaluate(PROGRESS_JS)))
                 next_progress = now + LOAD_PROGRESS_EVERY_S
-            busy = any([m.step(now, moving) for m in movers])
+            busy = [m.step(now, moving) for m in movers]   # every mover steps
+            busy = any(busy)
             time.sleep(0.05)
         progress.append((round(time.monotonic() - t0, 1), long_page.evaluate(PROGRESS_JS)))
         long_events, long_end = long_page.evaluate(

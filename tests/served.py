@@ -128,20 +128,20 @@ class Page:
 
 
 TABLE_JS = """() => {
-    // The rows of the first table widget (Tabulator) on the page, as lists of cell texts.
+    // The rows of the first visible table (the numbers) on the page, as lists of cell texts.
     const tables = [];
     function find(root) {
         for (const el of root.querySelectorAll("*")) {
-            if (el.classList && el.classList.contains("tabulator")) tables.push(el);
+            if (el.tagName === "TABLE" && el.classList.contains("dataframe") && el.checkVisibility()) tables.push(el);
             if (el.shadowRoot) find(el.shadowRoot);
         }
     }
     find(document);
     if (!tables.length) return [];
-    const field = c => c.getAttribute("tabulator-field");
-    return [...tables[0].querySelectorAll(".tabulator-row")].map(row => [...row.querySelectorAll(".tabulator-cell")]
-        .filter(c => field(c) !== null && field(c) !== "index" && c.offsetParent !== null).map(c => c.innerText.trim()));
+    return [...tables[0].querySelectorAll("tbody tr")].map(row => [...row.querySelectorAll("td, th")]
+        .map(c => c.innerText.trim()));
 }"""
+TABLE_ROW = "table.dataframe tbody tr"  # a table row (Playwright's CSS selectors enter shadow roots)
 
 
 def query(**items):

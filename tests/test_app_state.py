@@ -10,7 +10,7 @@ from urllib.parse import parse_qsl, urlsplit
 import numpy as np
 import pytest
 
-from app import memory, plotting, study
+from app import jobs, memory, plotting, study
 from app.features import cloud, common, gauges, longrun, orbits, structure, theta
 from app.plotting import DENSE, POINTS, Raster
 from app.presets import PRESETS, URL_NAMES, parse_items, query_items
@@ -201,7 +201,7 @@ def test_numbers_table_is_the_full_resolution_summary():
     assert cols[label][0] == f"{c.summary['max |H + p_t|']:.3g}" and cols[label][4] == "20,000"
     assert next(iter(cols)) == "h = 0.001, T = 20"
     view = drawn(orbits.OrbitsView(s))
-    assert list(view.table.value[label]) == cols[label]
+    assert list(view.table.object[label]) == cols[label]
 
 
 def test_series_are_downsampled_and_dense_portraits_rasterized():
@@ -477,6 +477,7 @@ def test_a_long_run_redraws_at_most_once_per_interval_and_ends_with_everything(m
 
     monkeypatch.setattr(longrun, "LONG_CHUNK_SECONDS", 0.01)
     monkeypatch.setattr(longrun, "LONG_DRAW_SECONDS", 0.1)
+    monkeypatch.setattr(jobs, "PROGRESS_S", 0.0)
     s = Study(scene="damped", values={"gamma": 2e-4})
     lr = longrun.LongRun(s, T_long=1e5)
     progress, drawn_ = [], []
@@ -493,6 +494,23 @@ def test_a_long_run_redraws_at_most_once_per_interval_and_ends_with_everything(m
     for d in lr.data.values():  # every bin (t: the time after each bin's first step)
         assert len(d["t"]) == -(-steps // width)
         assert d["t"][-1] == pytest.approx(((len(d["t"]) - 1) * width + 1) * s.h)
+
+
+def test_progress_reaches_the_page_at_most_once_per_progress_interval(monkeypatch):
+    """Each progress update costs the page a layout of the whole document: a run reporting every
+    chunk reaches it at most once per PROGRESS_S, and its last report (done) always does."""
+    import time
+
+    monkeypatch.setattr(longrun, "LONG_CHUNK_SECONDS", 0.01)
+    monkeypatch.setattr(jobs, "PROGRESS_S", 0.1)
+    s = Study(scene="damped", values={"gamma": 2e-4})
+    lr = longrun.LongRun(s, T_long=1e5)
+    shown = []
+    lr.param.watch(lambda e: shown.append((time.perf_counter(), e.new)), "progress")
+    lr.start()
+    assert lr.status.startswith("done") and shown[-1][1] == 1.0
+    gaps = np.diff([t for t, _ in shown[:-2]])  # the last two: the final report, then "done"
+    assert len(gaps) >= 3 and gaps.min() >= 0.07, gaps
 
 
 def test_a_freed_app_gives_memory_back_then_is_logged_after_its_collection(monkeypatch):

@@ -8,7 +8,7 @@ from urllib.parse import parse_qs, urlparse
 
 import pytest
 from playwright.sync_api import expect
-from served import CHROMIUM, START_TIMEOUT_S, TABLE_JS, query
+from served import CHROMIUM, START_TIMEOUT_S, TABLE_JS, TABLE_ROW, query
 
 from app.presets import PRESETS
 from cosymp.report.style import METHOD_COLORS
@@ -117,7 +117,7 @@ def test_05_equations_keep_their_primes_and_summaries_read_as_text(page):
         t += el.textContent + "\\n"; for (const el of root.querySelectorAll("*")) if (el.shadowRoot) find(el.shadowRoot); }
         find(document); return t; }""")
     assert "′" in katex, "A′ = A + ∇χ keeps its prime"
-    assert "e^{" not in html and "β(t)" in page.page.locator("h2 + p").first.inner_text()
+    assert "e^{" not in html and "β(t)" in page.page.locator("h2:visible + p").first.inner_text()
     page.check()
 
 
@@ -133,7 +133,9 @@ def test_06_the_long_run_of_the_first_view_runs_and_shows_progress(page):
     assert page.page.locator(".notyf__toast", has_text="reduce h").count() == 0
     key = page.page.locator(".colorkey").last
     assert "stopped" not in key.inner_text() and key.inner_text().count("\n") == 0
-    page.page.locator("button", has_text="Cancel").click()
+    cancel = page.page.locator("button", has_text="Cancel")
+    if cancel.is_enabled():  # the run may have ended already (1e6 steps per method)
+        cancel.click()
     page.check()
 
 
@@ -155,7 +157,7 @@ def test_08_hard_cases_show_finite_figures_readable_ticks_and_both_orbits(page):
     first_row = page.numbers()[0]
     assert first_row[0] == "max |H + p_t|" and "nan" not in " ".join(first_row) and "–" not in first_row[1:]
     fmt = page.page.evaluate(FORMAT_JS, [0, 5e303, 1e304, 1.5e304])
-    assert max(map(len, fmt)) <= 6, fmt
+    assert fmt == ["0", "5e303", "1e304", "1.5e304"], "compact and distinct, however large the values"
     rk4 = next(p for p in PRESETS if p.name == "RK4 just past its stability limit")
     page.open(rk4.query())
     a, b = wait_for_plot(page, "A: phase portrait", lines=1), wait_for_plot(page, "B: phase portrait", lines=1)
@@ -165,7 +167,7 @@ def test_08_hard_cases_show_finite_figures_readable_ticks_and_both_orbits(page):
 
 def test_09_an_out_of_range_typed_value_is_refused_and_the_box_goes_back(page):
     page.open(query(scene="damped"))
-    page.page.wait_for_selector(".tabulator-row")
+    page.page.wait_for_selector(TABLE_ROW)
     box = page.page.locator("input.bk-input").nth(4)  # h, T, then the boxes of m, w0, gamma
     assert box.input_value() == "0.2"
     box.fill("1000000")
@@ -178,7 +180,7 @@ def test_09_an_out_of_range_typed_value_is_refused_and_the_box_goes_back(page):
 
 def test_10_the_url_holds_only_valid_state_in_one_format(page):
     page.open(query(scene="damped"))
-    page.page.wait_for_selector(".tabulator-row")
+    page.page.wait_for_selector(TABLE_ROW)
     h = page.page.get_by_label("Step h")
     h.fill("0")
     h.press("Enter")
@@ -232,7 +234,7 @@ def test_15_a_link_with_a_bad_step_shows_the_first_view_and_says_so(page):
     for bad in ("?h=-1", "?T=1e300"):
         page.open(bad)
         page.page.locator(".notyf__toast").first.wait_for()
-        page.page.wait_for_selector(".tabulator-row")
+        page.page.wait_for_selector(TABLE_ROW)
         wait_for_plot(page, "phase portrait")
         expect(page.page.get_by_label("Step h")).to_have_value("0.2")
     page.check()

@@ -7,13 +7,13 @@ through Playwright's async API (one event loop, the pages work at once):
 
 1. Priming: one default page is opened, closed and its session destroyed; then "idle" RSS and
    threads are taken (the first page's one-time imports and caches are not per-session costs).
-2. Pages 1..10 open the default app, one after another (a session costs the server ~3 s of its
+2. Pages 1..10 open the app on the damped scene, one after another (a session costs the server ~3 s of its
    event loop to build; opened all at once, pages connect their websocket after the unused-session
    lifetime and the server builds each session twice). Page 1 then makes BASELINE_MOVES moves
    alone: the unloaded latency.
 3. Page 0 opens the preset "Fig. damped: volume form (gamma 2e-4, T 5e5)" (the Long run view)
-   with its horizon raised to LONG_T = 3e6 (3e7 steps per method, six times the paper's) and presses
-   "Start long run". The run must still be running when the load and the refusals are over, to be
+   with its horizon raised to LONG_T = 3e6 (3e7 steps per method, six times the paper's); the tab
+   starts its run when first shown. The run must still be running when the load and the refusals are over, to be
    cancelled: the paper's 5e6 steps ended before that on the CI machine once the run redrew less
    often. Its cost to the server does not depend on the horizon (256 MB lease, LONG_BINS bins).
 4. The load: pages 1..10 at once each move the gamma slider MOVES times (focus its handle, press
@@ -89,7 +89,7 @@ from urllib.parse import parse_qs, urlparse
 
 import pytest
 from playwright.async_api import TimeoutError as PlaywrightTimeout
-from served import ARTIFACTS, CHROMIUM, CHROMIUM_ARGS, START_TIMEOUT_S, served
+from served import ARTIFACTS, CHROMIUM, CHROMIUM_ARGS, START_TIMEOUT_S, TABLE_ROW, served
 
 SERVER_LOG = ARTIFACTS / "load-server.log"
 
@@ -99,7 +99,8 @@ CHECK_UNUSED_MS = 500
 SLIDER_PAGES = 10
 MOVES = 5
 BASELINE_MOVES = 3
-HANDLE_START = "0.2"           # gamma's slider handle (aria-valuenow, one decimal) on the default page
+DAMPED = "?scene=damped"      # the slider pages' scene (the first view is another)
+HANDLE_START = "0.2"           # gamma's slider handle (aria-valuenow, one decimal) on the damped page
 MOVE_TIMEOUT_MS = 60_000       # per move, for its update and again for its settling
 MOVES_WALL_S = 150             # no move starts after this many seconds of the slider phase
 LOAD_TIMEOUT_MS = 90_000
@@ -426,7 +427,7 @@ async def toast(page, *texts):
 
 def header(page):
     """The numbers table's first column title: what the numbers were computed for (h and T)."""
-    return page.locator(".tabulator-col-title").first
+    return page.locator("table.dataframe thead th").first
 
 
 async def refusals(page, sampler, long_running):
@@ -478,7 +479,7 @@ async def scenario(base, sampler, sessions, probe=None):
         browser = await p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, timeout=60_000)
         try:
             # Priming: the first page's one-time costs, then idle.
-            context, _, _ = await new_page(browser, base, ".tabulator-row")
+            context, _, _ = await new_page(browser, base + DAMPED, TABLE_ROW)
             await context.close()
             r["priming_destroyed_s"] = await asyncio.to_thread(sessions.wait_all_destroyed)
             rss, threads = await asyncio.to_thread(sampler.settled)
@@ -490,7 +491,7 @@ async def scenario(base, sampler, sessions, probe=None):
             # session costs ~3 s of the event loop; ten opened at once take ~50 s to connect).
             opened = []
             for _ in range(SLIDER_PAGES):
-                opened.append(await new_page(browser, base, ".tabulator-row"))
+                opened.append(await new_page(browser, base + DAMPED, TABLE_ROW))
             r["page_load_s"] = [round(s, 2) for _, _, s in opened]
             r["live_sessions_after_open"] = sessions.live()
 
@@ -501,9 +502,9 @@ async def scenario(base, sampler, sessions, probe=None):
             r["pages_open"] = {"rss_mb": round(rss, 1), "threads": threads}
 
             # Page 0: the long run.
+            # (the tab starts its run when first shown)
             long_ctx, long_page, _ = await new_page(browser, base + preset.query(),
                                                     "button:has-text('Start long run')")
-            await long_page.locator("button", has_text="Start long run").click()
             await long_page.get_by_text("running").first.wait_for()
             stop = asyncio.Event()
             progress_task = asyncio.create_task(watch_progress(long_page, stop))
