@@ -121,6 +121,20 @@ def test_the_heat_map_taps_to_the_cell_under_the_click_and_marks_failures(tongue
     assert plot.mapper.nan_color == "black"
 
 
+def test_a_map_that_is_zero_to_round_off_is_drawn_as_zero_and_says_so(tongue):
+    """Midpoint on the decaying oscillator: every one-step map is a rotation, so the growth is
+    round-off (|growth| ~ 1e-16) in every cell; it is one colour, not noise, and the title says why."""
+    flat = sweep.run(sweep.plan("decaying", "midpoint", ["h=0.05:3:4:log", "lam=0.1:5:3"], ["growth"], T=10))
+    assert np.abs(flat.values["growth"]).max() < 1e-14
+    plot = maps.MapPlot(True, False, False, lambda i, j: None)
+    plot.set(flat)
+    assert (plot.mapper.low, plot.mapper.high) == (-maps.ROUND_OFF, maps.ROUND_OFF)
+    assert plot.fig.title.text.endswith("0 to round-off in every cell (|value| ≤ 1e-12)")
+    _, m = tongue
+    plot.set(m.result)
+    assert plot.mapper.high == m.result.values["growth"].max() and "round-off" not in plot.fig.title.text
+
+
 @pytest.mark.parametrize("change, needle", [
     ({"x": "eps", "y": "eps"}, "both vary eps"),
     ({"x_start": -1.0}, "outside"),

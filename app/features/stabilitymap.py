@@ -211,6 +211,9 @@ def cells(result):
             "x": np.asarray(ax.values)[i], "y": np.asarray(ay.values)[j]}
 
 
+ROUND_OFF = 1e-12  # a linear map whose every cell is within this of 0 is drawn as 0
+
+
 class MapPlot:
     """The heat map for one pair of axis kinds (linear or log): quads coloured by the measure, a
     colour bar, hover, and a click that calls on_tap(i, j)."""
@@ -233,12 +236,16 @@ class MapPlot:
         ax, ay = plan.axes
         data = cells(result)
         z = data["z"][np.isfinite(data["z"])]
-        if len(z):
+        flat = isinstance(self.mapper, LinearColorMapper) and len(z) and np.abs(z).max() <= ROUND_OFF
+        if flat:  # round-off in every cell: one colour, not noise drawn as structure
+            self.mapper.update(low=-ROUND_OFF, high=ROUND_OFF)
+        elif len(z):
             lo, hi = float(z.min()), float(z.max())
             self.mapper.update(low=lo, high=hi if hi > lo else lo + (abs(lo) or 1.0))
         self.source.selected.indices = []
         self.source.data = data
-        self.fig.title.text = f"{plan.measures[0]} of {plan.method} on {plan.scene}"
+        self.fig.title.text = f"{plan.measures[0]} of {plan.method} on {plan.scene}" + (
+            f": 0 to round-off in every cell (|value| ≤ {ROUND_OFF:g})" if flat else "")
         self.fig.xaxis.axis_label, self.fig.yaxis.axis_label = ax.name, ay.name
 
 
