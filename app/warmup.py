@@ -5,17 +5,15 @@ process per core, with progress (the same as `cosymp compile`), and returns at o
 cache.
 
 `panel serve app --setup app/warmup.py` runs `prepare()` before the server starts. On a warm
-cache it loads every kernel and compiles datashader's aggregation (a few seconds). On a cold
+cache it loads every kernel (a few seconds). On a cold
 cache (a fresh install, or after a change to the sources the kernels are built from) it compiles
 the first page's kernels in one process per core, serves, and compiles the rest in lowered-
 priority processes meanwhile; a run whose kernels are still being compiled waits for them
 (cosymp.warm.ensure), and later kernels load from the cache on first use. The server itself
 never compiles a kernel, so it stays at its warm size.
 """
-import importlib
 import time
 
-RASTER_COLUMNS = ("x", "y")  # the column names of every rasterized portrait (views.raster_dims)
 FIRST_VIEW = {"scene": "modulated", "method": "midpoint", "other": "rk4", "h": 0.2, "T": 2000.0,
               "values": {"eps": 0.2, "alpha": 0.05}}
 """What the app shows first (study.Study's defaults; presets.PRESETS[0]): RK4's |H + p_t| starts below
@@ -37,21 +35,17 @@ def first_keys():
 
 def prepare(report=print, preload=True):
     """Make the kernels ready (see the module's doc); with preload, load them into this process
-    (every kernel and datashader's aggregation on a warm cache, the first page's on a cold one).
+    (every kernel on a warm cache, the first page's on a cold one).
     Returns the seconds it took."""
     from cosymp import warm
 
     start = time.perf_counter()
     first = first_keys()
     compiler = warm.start(first, report=lambda line: report(f"cosymp compile {line}"))
-    if preload:
-        for module in ("holoviews.plotting.bokeh", "holoviews.operation.downsample", "tsdownsample"):
-            importlib.import_module(module)
     if compiler is None:
         if preload:
             for unit in warm.units():
                 unit.run()
-            rasterize_once()
         return time.perf_counter() - start
     compiler.wait(first)
     if preload:
@@ -59,19 +53,6 @@ def prepare(report=print, preload=True):
             if unit.key in first:
                 unit.run()
     return time.perf_counter() - start
-
-
-def rasterize_once():
-    """Rasterize a small path as dense portraits are (columns RASTER_COLUMNS): datashader compiles
-    its aggregation for each pair of column names on first use, without a disk cache (about 4 s
-    and 150 MB, on the event loop of whichever page first shows more than DENSE_RECORDS records)."""
-    import holoviews as hv
-    import numpy as np
-    from holoviews.operation.datashader import datashade
-
-    x = np.linspace(0.0, 1.0, 16)
-    datashade(hv.Path(dict.fromkeys(RASTER_COLUMNS, x), list(RASTER_COLUMNS)), cmap=["#000000"], dynamic=False,
-              width=8, height=8)
 
 
 if __name__ == "__main__":

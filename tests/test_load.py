@@ -57,8 +57,8 @@ Bounds, from runs on 2 shared cores (another suite's server and Chromium often r
   of the two cores. 40 s is ~1.5x the worst p95 seen; a starved session (waiting for the long
   run, minutes) or lost updates (MOVE_TIMEOUT_MS) go far past it.
 * Peak RSS - RSS with the ten pages open (before the long run) < the cap: the cap is on
-  computations, the pages' documents come on top (observed: idle 437-443 MB, which includes
-  datashader compiled by the warm-up; pages open +50-60 MB; peak 763-891 MB, 326-448 MB over
+  computations, the pages' documents come on top (observed: idle 437-443 MB, when the warm-up
+  still compiled datashader; pages open +50-60 MB; peak 763-891 MB, 326-448 MB over
   idle). Before the app gave freed memory back, CI saw a peak 520 MB over idle.
 * After close: every page's state freed (the finalizer's log lines = sessions launched); threads
   <= idle + EXECUTOR_THREADS (the asyncio default executor's workers, min(32, cpu + 4), are created
