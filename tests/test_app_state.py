@@ -64,6 +64,18 @@ def test_the_first_view_shows_rk4_drifting_out_of_the_symplectic_band():
     assert s.state() == {**PRESETS[0].state, "theta": 0.5}
 
 
+def test_the_verdict_calls_a_band_bounded_only_when_the_data_show_it():
+    """Near parametric resonance (modulated, eps = 0.5) the solution itself grows, and so does the
+    symplectic method's |H + p_t|: the verdict must say how much, not call the band bounded."""
+    s = Study(scene="modulated", values={"eps": 0.5})
+    midpoint = np.abs(s.results.entries[0].comparison.run.H_ext[:, 0])
+    tenth = len(midpoint) // 10
+    growth = midpoint[-tenth:].max() / midpoint[:tenth].max()
+    assert growth > common.BAND_GROWTH
+    text = common.verdict(s.results)
+    assert "bounded" not in text and f"{growth:.2g}× wider in the run's last tenth" in text
+
+
 def test_values_and_inputs_follow_each_other():
     s = Study(scene="damped")
     s.values = {"gamma": -0.1, "q0": 2.0}
