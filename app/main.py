@@ -17,11 +17,13 @@ from cosymp.errors import InputError, RunError
 from .features import FEATURES
 from .jobs import Note
 from .memory import log_when_freed, map_large_blocks
+from .plotting import katex_fonts_css
 from .presets import URL_NAMES, parse_items, query_items
 from .study import Controls, PresetLinks, SceneInfo, Study, study_report
 from .warmup import prepare
 
 ASSETS = Path(__file__).resolve().parent.parent / "assets"
+BOKEH_READS = "app/static/bokeh_reads.js"  # served from app/static by the server (see the file)
 NOTIFY_MS = {"error": 8000, "warning": 6000, "info": 4000}
 COPY_LINK_JS = """
 const label = 'Copy link to this view';
@@ -167,6 +169,7 @@ class App(param.Parameterized):
         )
 
 
-pn.extension("katex", notifications=True, design="bootstrap")
+pn.extension("katex", notifications=True, design="bootstrap", js_files={"cosymp_bokeh_reads": BOKEH_READS},
+             raw_css=[katex_fonts_css()])
 pn.state.notifications.position = "bottom-left"  # over the sidebar's lower part, not over the plots
 App().template().servable(title="cosymp")

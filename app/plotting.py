@@ -9,8 +9,10 @@ Colours are the methods' own (cosymp.report.style), shared with the reports. Of 
 methods the first (A) is drawn solid and on top, the second (B) dashed beneath it, so both show
 where they overlap.
 """
+import contextlib
 import html
 import math
+import re
 from functools import cache
 from pathlib import Path
 
@@ -286,12 +288,13 @@ def vline(fig, color="#868e96"):
 def push(update):
     """Run update() (which changes Bokeh models) so that its changes reach the page as one message:
     under a server from the session's loop (before the page has loaded, in a callback that holds
-    the document's lock), without one directly."""
+    the document's lock), without one directly. The document's model graph is recomputed once, at
+    the end, not after each layout change (each recompute walks every model of the page)."""
     doc = pn.state.curdoc
     if doc is not None and getattr(doc, "session_context", None) is not None and not pn.state.loaded:
         doc.add_next_tick_callback(update)
         return
-    with unlocked():
+    with unlocked(), (doc.models.freeze() if doc is not None else contextlib.nullcontext()):
         update()
 
 
@@ -307,6 +310,35 @@ def grid(*items, ncols=2):
 def stylesheet():
     """The app's CSS, given to each HTML pane (Panel renders components in shadow roots)."""
     return (ASSETS / "app.css").read_text()
+
+
+KATEX = Path(__file__).resolve().parent / "static" / "katex"
+KATEX_URL = "app/static/katex/"  # where the app's server serves KATEX, relative to the page
+
+
+@cache
+def katex_css():
+    """KaTeX's own stylesheet (app/static/katex: the release Panel bundles, with its fonts), its font
+    URLs made relative to the page and woff2 only. Panel's LaTeX pane shows KaTeX's MathML and hides
+    its HTML, and Panel's bundled copy of this sheet names font files it does not ship: Chromium drew
+    the equations in a text font without math tables (primes became dots, fractions collapsed).
+    Panel inlines a local stylesheet, so URLs relative to the sheet's file would not resolve. The
+    font families are renamed (cosymp-KaTeX_Main, ...): with the bundled sheet's names, Chromium
+    also fetched the bundled faces while ours loaded (404s)."""
+    css = re.sub(r"(?<![/A-Za-z])KaTeX_", "cosymp-KaTeX_", (KATEX / "katex.min.css").read_text())
+    css = re.sub(r'url\((fonts/[^)]+)\.woff2\) format\("woff2"\)(,url\([^)]*\) format\("[a-z]+"\))*',
+                 rf'url({KATEX_URL}\1.woff2) format("woff2")', css)
+    return css + "\n.katex span.katex-html { display: inline; }  /* Panel's katex.css hides it */\n"
+
+
+def katex_fonts_css():
+    """The @font-face rules of katex_css(), for the document (a shadow root's are not enough)."""
+    return "\n".join(re.findall(r"@font-face\{[^}]*\}", katex_css()))
+
+
+def equation(tex, **kw):
+    """A LaTeX pane drawn by KaTeX with its own stylesheet and fonts."""
+    return pn.pane.LaTeX(tex, renderer="katex", stylesheets=[katex_css()], **kw)
 
 
 def note(obj, **kw):

@@ -26,7 +26,7 @@ from cosymp.scenes import SCENES
 from cosymp.study import compare_until_failure as study_until_failure
 
 from .jobs import Job, Note
-from .plotting import note
+from .plotting import equation, note
 from .presets import HARD, PAPER, PRESETS, URL_NAMES, rounded
 from .warmup import FIRST_VIEW
 
@@ -411,27 +411,31 @@ def number_control(inputs, name):
 
 
 class SceneInfo(pn.viewable.Viewer):
-    """The scene's title, summary, equations, what to look for, and its notes."""
+    """The scene's title, summary, equations, what to look for, and its notes. A scene change
+    rewrites the panes' text (and shows as many equation panes as the scene has), so the page's
+    layout is not rebuilt."""
 
     study = param.ClassSelector(class_=Study)
 
     def __panel__(self):
-        box = pn.Column(scene_info(self.study.scene), sizing_mode="stretch_width")
-        self.study.param.watch(lambda e: box.__setitem__(0, scene_info(e.new)), "scene")
-        return box
+        most = max(len(s.equations) for s in SCENES.values())
+        self._head = note("", margin=(0, 10))
+        self._equations = [equation("", styles={"font-size": "1.05em"}) for _ in range(most)]
+        self._look = note("", margin=(0, 10))
+        self._show(self.study.scene)
+        self.study.param.watch(lambda e: self._show(e.new), "scene")
+        return pn.Column(self._head, pn.FlexBox(*self._equations, gap="1.5em", sizing_mode="stretch_width"),
+                         self._look, sizing_mode="stretch_width")
 
-
-def scene_info(name):
-    s = SCENES[name]
-    notes = "".join(f"<li>{html.escape(n)}</li>" for n in s.notes)
-    return pn.Column(
-        note(f"<h2>{html.escape(s.title)}</h2><p>{html.escape(s.summary)}</p>", margin=(0, 10)),
-        pn.FlexBox(*[pn.pane.LaTeX(f"${e}$", renderer="katex", styles={"font-size": "1.05em"})
-                     for e in s.equations], gap="1.5em", sizing_mode="stretch_width"),
-        note(f"<p class='lookfor'><b>Look for:</b> {html.escape(s.look_for)}</p>"
-             + (f"<ul class='notes'>{notes}</ul>" if notes else ""), margin=(0, 10)),
-        sizing_mode="stretch_width",
-    )
+    def _show(self, name):
+        s = SCENES[name]
+        notes = "".join(f"<li>{html.escape(n)}</li>" for n in s.notes)
+        self._head.object = f"<h2>{html.escape(s.title)}</h2><p>{html.escape(s.summary)}</p>"
+        for i, pane_ in enumerate(self._equations):
+            shown = i < len(s.equations)
+            pane_.param.update(object=f"${s.equations[i]}$" if shown else "", visible=shown)
+        self._look.object = (f"<p class='lookfor'><b>Look for:</b> {html.escape(s.look_for)}</p>"
+                             + (f"<ul class='notes'>{notes}</ul>" if notes else ""))
 
 
 class PresetLinks(pn.viewable.Viewer):

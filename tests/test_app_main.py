@@ -28,3 +28,47 @@ def test_a_tab_is_built_when_first_shown_and_closing_the_page_releases_every_sta
     assert len(app.tabs[names.index("theta")]) == 1 and app.states["theta"].results is not None
     app._stop(None)
     assert app.study._closed and all(s is None or getattr(s, "_closed", True) for s in app.states.values())
+
+
+def test_the_bokeh_reads_shim_still_matches_bokehjs_and_no_css_sets_bk_variables():
+    """app/static/bokeh_reads.js replaces two BokehJS reads of computed style (every visual
+    property through --bk-* CSS variables; a plot's font size). It is only right while cosymp sets
+    no --bk-* variable, and only useful while BokehJS still reads them that way: when a Bokeh
+    release changes either, this says so."""
+    import re
+    from pathlib import Path
+
+    import bokeh
+
+    js = (Path(bokeh.__file__).parent / "server" / "static" / "js" / "bokeh.js").read_text()
+    assert re.search(r"_get_css_value\(name\) \{\s*const style = getComputedStyle\(this\.obj\.el\);", js), \
+        "BokehJS no longer reads visuals through getComputedStyle: app/static/bokeh_reads.js may go"
+    assert re.search(r"get base_font_size\(\) \{\s*const font_size = getComputedStyle\(this\.el\)\.fontSize;", js), \
+        "BokehJS no longer reads a plot's font size through getComputedStyle: revisit app/static/bokeh_reads.js"
+    root = Path(main.__file__).resolve().parent.parent
+    sources = [*root.glob("assets/*.css"), *root.glob("app/**/*.py"), *root.glob("app/**/*.js")]
+    assert sources and not [p for p in sources if re.search(r"--bk-[a-z]", p.read_text())], \
+        "a --bk-* CSS variable would be ignored by the figures (app/static/bokeh_reads.js)"
+    assert (root / main.BOKEH_READS).is_file()
+
+
+def test_the_equations_get_katexs_stylesheet_and_every_font_it_names():
+    """Panel's bundled KaTeX stylesheet names fonts it does not ship, and its LaTeX pane hides
+    KaTeX's HTML: the app serves the same KaTeX release's sheet and fonts (app/static/katex) and
+    gives the sheet to every equation, with each font's URL pointing at a file it serves."""
+    import re
+    from pathlib import Path
+
+    import panel
+
+    from app import plotting
+
+    bundled = list((Path(panel.__file__).parent / "dist" / "bundled" / "katex").glob("katex@*/dist/katex.min.css"))
+    assert len(bundled) == 1 and bundled[0].parent.parent.name == "katex@" + re.search(
+        r"katex-version:after\{content:\"([0-9.]+)\"\}", (plotting.KATEX / "katex.min.css").read_text()).group(1), "another KaTeX release"
+    wanted = set(re.findall(r"url\(fonts/([^)]+\.woff2)\)", bundled[0].read_text()))
+    urls = re.findall(r"url\(([^)]+)\)", plotting.katex_fonts_css())
+    assert wanted and {u.rsplit("/", 1)[1] for u in urls} == wanted
+    assert all(u.startswith(plotting.KATEX_URL) and (plotting.KATEX / u.removeprefix(plotting.KATEX_URL)).is_file()
+               for u in re.findall(r"url\(([^)]+)\)", plotting.katex_css()))
+    assert plotting.katex_css() in plotting.equation("$q$").stylesheets

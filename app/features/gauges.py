@@ -16,7 +16,7 @@ from cosymp.scenes.charged import GAUGES
 from cosymp.study import gauge_study
 
 from ..jobs import Note
-from ..plotting import figure, grid, note, pane, path, peaks, series, source, swatch
+from ..plotting import equation, figure, grid, note, pane, path, peaks, series, source, swatch
 from ..study import comparison_bytes, theta_for
 from .base import Feature, FeatureView, Follower
 
@@ -115,7 +115,7 @@ class GaugeView(FeatureView):
                 figs.append(pane(fig))
             columns.append(pn.Column(note(f"<h4>{text}</h4>"), *figs, sizing_mode="stretch_width"))
         rows = [pn.Row(note(f"<b>{name}</b>", width=90, sizing_mode=None),
-                       pn.pane.LaTeX(f"$\\chi = {x.chi}$", renderer="katex", width=230),
+                       equation(f"$\\chi = {x.chi}$", width=230),
                        note(f"<span class='doc'>condition: {html.escape(x.condition)}</span>"
                             + (f"<br><span class='caveat'>{html.escape(x.caveat)}</span>" if x.caveat else "")),
                        sizing_mode="stretch_width")
