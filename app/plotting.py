@@ -7,7 +7,7 @@ the reductions of long series (per-bin envelopes, rasterized portraits) live her
 
 Colours are the methods' own (cosymp.report.style), shared with the reports. Of two compared
 methods the first (A) is drawn solid and on top, the second (B) dashed beneath it, so both show
-where they overlap.
+where they overlap (A is slightly transparent, so a band A fills does not hide B).
 """
 import contextlib
 import html
@@ -33,6 +33,7 @@ from cosymp.report.style import pair_colors
 from cosymp.series import envelope, thin
 
 SLOTS = ("A", "B")
+A_ALPHA = 0.7  # A is drawn over B; where A's orbit fills a band, B still shows through it
 HEIGHT = 260
 POINTS = 1200  # a long series is reduced to this many points (per-bin minima and maxima)
 PATH_POINTS = 4000  # a phase portrait keeps this many points in order
@@ -70,7 +71,15 @@ function fmt(v, step, exp) {
   return trim(v.toExponential(digits - 1));
 }
 if (span > 0 && span < 1e-4 * big) {
-  const ref = finite[Math.floor(finite.length / 2)];
+  // The reference is the tick written with the fewest significant digits (1, not 0.999997), the
+  // one nearest the middle among equals; the others are offsets from it.
+  const sig = (v) => { for (let p = 1; p < 17; p++) if (Math.abs(Number(v.toPrecision(p)) - v) <= 1e-6 * step) return p; return 17; };
+  const mid = Math.floor(finite.length / 2);
+  let ref = finite[mid];
+  finite.forEach((v, i) => {
+    const better = sig(v) - sig(ref) || Math.abs(i - mid) - Math.abs(finite.indexOf(ref) - mid);
+    if (better < 0) ref = v;
+  });
   if (tick === ref) return trim(alone(Math.abs(ref)) ? ref.toExponential(11) : ref.toPrecision(12));
   const d = Math.abs(tick - ref);
   return (tick > ref ? "+" : "\\u2212") + fmt(d, step, alone(d));
@@ -78,7 +87,7 @@ if (span > 0 && span < 1e-4 * big) {
 return fmt(tick, step, exp);
 """
 """Compact tick labels: 4e-4, 1e5, 2500; values that differ only in late digits as offsets from the
-middle tick (1, +2e-16). (A model belongs to one page: each axis gets its own formatter.)"""
+roundest tick (1, +2e-16). (A model belongs to one page: each axis gets its own formatter.)"""
 LOG_TICKS = r"""
 if (!(tick > 0)) return "";
 if (tick >= 1e-3 && tick < 1e5) return String(parseFloat(tick.toPrecision(3)));
@@ -127,7 +136,8 @@ class Pair:
         self.lines, self.marks = {}, {}
         for slot in reversed(SLOTS):
             self.lines[slot] = fig.line("x", "y", source=self.sources[slot], line_width=width,
-                                        line_dash="dashed" if slot == "B" else "solid")
+                                        line_dash="dashed" if slot == "B" else "solid",
+                                        line_alpha=A_ALPHA if slot == "A" else 1.0)
             if dots:
                 self.marks[slot + "."] = fig.scatter("x", "y", source=self.sources[slot], size=4)
             if start:

@@ -37,7 +37,7 @@ class Figures:
             for slot in (SLOTS if split else (None,)):
                 fig = figure(title if slot is None else f"{slot}: {title}", xl, yl)
                 self.portraits.append((slot, fig, Raster(fig) if dense else Pair(fig, start=True)))
-        self.energy = Pair(figure("max |H + p_t| per bin (0 for the exact flow)", "t", "|H + p_t|", logy=True))
+        self.energy = Pair(figure("max |H + p_t| per bin (exact: 0)", "t", "|H + p_t|", logy=True))
         self.error = Pair(figure("relative error |z − z_exact| / |z_exact|", "t", "relative error", logy=True)) \
             if SCENES[scene].has_flow else None
         figs = [f for _, f, _ in self.portraits] + [self.energy.fig] + ([self.error.fig] if self.error else [])
