@@ -200,14 +200,23 @@ class Curves:
             self.active = active
             self.panel.objects = [pane(active.fig)]
         active.colors(names)
-        active.set({slot: series(t, y, logy=active is self.log) for slot, (t, y) in data.items()})
+        floor = zero_floor([y for _, y in data.values()])
+        active.set({slot: series(t, y, logy=active is self.log, floor=floor) for slot, (t, y) in data.items()})
 
 
-def series(x, y, logy=False):
+def series(x, y, logy=False, floor=FLOOR):
     """A time series for display: the per-bin envelope of at most POINTS points; on a log axis its
-    absolute value, exact zeros at FLOOR."""
+    absolute value, exact zeros at `floor`."""
     x, y = envelope(x, finite(np.abs(y) if logy else y), POINTS)
-    return x, (np.maximum(y, FLOOR) if logy else y)
+    return x, (np.where(y == 0, floor, y) if logy else y)
+
+
+def zero_floor(ys):
+    """Where exact zeros are drawn on a log axis among these series: FLOOR, or a decade below their
+    smallest nonzero value when that is smaller (charged's paper volume estimator is 8e-45 for RK4
+    and exactly 0 for midpoint: at FLOOR the zero was drawn above the data, and the data not at all)."""
+    small = [np.min(a[a > 0]) for a in (np.abs(finite(y)) for y in ys) if np.any(a > 0)]
+    return min([FLOOR] + [v / 10 for v in small])
 
 
 def peaks(x, y):

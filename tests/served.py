@@ -100,9 +100,9 @@ class Page:
         assert self.errors == [], self.errors
 
     def numbers(self):
-        """The numbers table's rows (lists of cell texts), without its wall-time row."""
+        """The numbers table's rows (lists of cell texts), without its wall-time rows."""
         rows = self.page.evaluate(TABLE_JS)
-        return [r for r in rows if r and r[0] != "time (s)"]
+        return [r for r in rows if r and not r[0].endswith("time (s)") and "time with" not in r[0]]
 
     def plotted(self):
         """A fingerprint of every plotted data column on the page (sum and length per source)."""

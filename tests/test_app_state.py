@@ -10,7 +10,7 @@ from urllib.parse import parse_qsl, urlsplit
 import numpy as np
 import pytest
 
-from app import jobs, memory, plotting, study
+from app import jobs, memory, plotting, presets, study
 from app.features import cloud, common, gauges, longrun, orbits, structure, theta
 from app.plotting import DENSE, POINTS, Raster
 from app.presets import PRESETS, URL_NAMES, parse_items, query_items
@@ -235,6 +235,33 @@ def test_series_are_downsampled_and_dense_portraits_rasterized():
     assert image.dtype == np.uint32 and (image >> 24).max() > 0
 
 
+def test_the_energy_plot_starts_at_the_first_step_and_zeros_sit_below_the_data():
+    """|H + p_t| is 0 by construction at t = 0: drawn at FLOOR it stretched the log axis (damped:
+    500 steps, every one shown). On a log axis exact zeros are drawn at FLOOR, or a decade below
+    the smallest nonzero value when that is smaller (charged's paper volume estimator: 8e-45)."""
+    s = Study(scene="damped")
+    view = drawn(orbits.OrbitsView(s))
+    run = s.results.entries[0].comparison.run
+    src = shown_figures(view).energy.sources["A"].data
+    assert src["x"][0] == run.t[1] and len(src["x"]) == len(run.t) - 1
+    assert np.array_equal(src["y"], np.maximum(np.abs(run.H_ext[1:, 0]), plotting.FLOOR))
+    assert plotting.zero_floor([np.array([0.0, 1e-10]), np.array([3e-3])]) == plotting.FLOOR
+    assert plotting.zero_floor([np.array([0.0, 0.0]), np.array([8e-45, 1e-44])]) == pytest.approx(8e-46)
+    x, y = plotting.series(np.arange(3.0), np.array([0.0, -8e-45, 2e-44]), logy=True, floor=8e-46)
+    assert list(y) == [8e-46, 8e-45, 2e-44], "exact zeros at the floor, tiny values as they are"
+
+
+def test_the_numbers_give_the_integration_time_and_the_time_with_diagnostics():
+    """The report's "integration time (s)" is the run alone; the app showed the comparison's whole
+    time (with its nearby runs, loop and tangent maps) as "time (s)": 10-200x apart. Both now, named."""
+    s = Study(scene="damped")
+    cols = common.numbers(s.results)
+    rows = dict(zip(cols[next(iter(cols))], cols["midpoint"]))
+    c = s.results.entries[0].comparison
+    assert rows["integration time (s)"] == plotting.fmt(c.run.wall_s)
+    assert rows["time with diagnostics (s)"] == plotting.fmt(c.wall_s) and c.wall_s > c.run.wall_s
+
+
 def test_the_structure_and_cloud_views_plot_the_rigorous_checks():
     s = Study(scene="damped")
     view = drawn(structure.StructureView(s))
@@ -318,6 +345,19 @@ def test_long_run_of_a_diverging_setup_stops_with_data_up_to_there():
         step = int(re.search(r"in step (\d+)", d["failure"]).group(1))
         assert step * s.h == pytest.approx(d["t"][-1], abs=1.0)  # t holds bin starts
     assert s.message.level == "warning" and "long run" in s.message.text
+
+
+def test_the_long_runs_default_horizon_reaches_its_end_on_every_scene_at_its_defaults():
+    """100 times the study's T, at most the paper's long horizon: on damped at the scene's γ = 0.2 the
+    paper's 5e5 (a γ = 2e-4 run) overflowed at t ≈ 7000; the first view keeps the paper's 2e5."""
+    assert longrun.LongRun(Study()).T_long == 2e5
+    for name in SCENES:
+        s = Study(scene=name)
+        lr = longrun.LongRun(s)
+        assert lr.T_long == min(100 * s.T, presets.LONG_HORIZONS.get(name, np.inf))
+        if lr.T_long / s.h <= 2e5:
+            lr.start()
+            assert lr.status.startswith("done"), (name, lr.status)
 
 
 def test_long_run_refuses_a_horizon_over_the_cap():

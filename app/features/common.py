@@ -78,7 +78,7 @@ def verdict(runs):
 
 
 NUMBER_ROWS = ("max |H + p_t|", "max |det M - 1|", "max |M^T J M - J|", "final relative error", "steps",
-               "time (s)")
+               "integration time (s)", "time with diagnostics (s)")
 
 
 def numbers(runs):

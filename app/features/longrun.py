@@ -64,7 +64,7 @@ class LongRun(Job):
     WHAT = "a long run"
 
     def __init__(self, study, **params):
-        params.setdefault("T_long", long_horizon(study.scene))
+        params.setdefault("T_long", long_horizon(study.scene, study.T))
         super().__init__(study=study, **params)
         self._said = set()
         self._steps_done = 0
@@ -72,7 +72,7 @@ class LongRun(Job):
 
     def _on_scene(self, event):
         if not self.running:
-            self.T_long = long_horizon(self.study.scene)
+            self.T_long = long_horizon(self.study.scene, self.study.T)
 
     def say(self, note_):
         self.study.say(note_)

@@ -53,7 +53,9 @@ class Figures:
             drawn.set({s: (zcols(c.run, i, j) if isinstance(drawn, Raster) else path(*zcols(c.run, i, j)))
                        for s, c in shown.items()})
         self.energy.colors(names(runs))
-        self.energy.set({slot: peaks(c.run.t, np.abs(c.run.H_ext[:, 0])) for slot, c in cs.items()})
+        # From the first step: H + p_t is 0 by construction at t = 0, and drawn at FLOOR it stretched
+        # the log axis over a dozen empty decades.
+        self.energy.set({slot: peaks(c.run.t[1:], np.abs(c.run.H_ext[1:, 0])) for slot, c in cs.items()})
         if self.error is not None:
             self.error.colors(names(runs))
             self.error.set(over_time(runs, lambda c: (c.run.t, c.error), logy=True))
