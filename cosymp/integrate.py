@@ -74,7 +74,8 @@ class Trajectory:
     """Recorded states of N trajectories: t (K,), z = (q, p) (K, N, 2n), pt and H (K, N).
 
     H_ext = H + p_t is the extended Hamiltonian (0 at the start by the convention
-    p_t(0) = -H(z0, 0)). `steps` were completed with step h; record j is step j*stride.
+    p_t(0) = -H(z0, 0)). `steps` were completed with step h; record j is step j*stride, and the
+    last record is the last step (also where stride does not divide steps).
     `wall_s` is the compiled loop's time (its compilation, if any, is not counted).
     `failure` holds the message of a run that stopped early (overflow, Newton).
     """
@@ -132,7 +133,16 @@ def default_stride(steps, members, m, increments=False):
     """simulate's default stride: every step while the records (members x (m + 1) values, three
     times that with increments) fit in MAX_RECORDED values, else the smallest stride that fits."""
     per_record = members * (m + 1) * (3 if increments else 1)
-    return max(1, math.ceil(steps * per_record / MAX_RECORDED))
+    stride = max(1, math.ceil(steps * per_record / MAX_RECORDED))
+    while records(steps, stride) * per_record > MAX_RECORDED:
+        stride += 1
+    return stride
+
+
+def records(steps, stride):
+    """How many states a run of `steps` steps records: the start, every stride-th step, and the
+    final step (one more record when stride does not divide steps)."""
+    return steps // stride + 1 + (steps % stride != 0)
 
 
 def simulate(setup, h, T, z0=None, stride=None, increments=False, t0=0.0, pt0=None):
@@ -140,7 +150,7 @@ def simulate(setup, h, T, z0=None, stride=None, increments=False, t0=0.0, pt0=No
 
     z0: (N, 2n) states (default: the scene's initial condition); pt0 defaults to -H(z0, t0).
     stride: record every stride-th step (default: every step while the records fit in
-    MAX_RECORDED values, else the smallest stride that fits).
+    MAX_RECORDED values, else the smallest stride that fits), and always the final step.
     """
     steps = check_step(h, T)
     Z = initial_states(setup, z0)
@@ -151,7 +161,7 @@ def simulate(setup, h, T, z0=None, stride=None, increments=False, t0=0.0, pt0=No
         stride = default_stride(steps, N, m, increments)
     elif not isinstance(stride, (int, np.integer)) or stride < 1:
         raise InputError(f"stride = {stride} must be a positive whole number")
-    K = steps // stride + 1
+    K = records(steps, stride)
     if K * per_record > MAX_RECORDED:
         raise InputError(f"recording {K} states of {N} trajectories exceeds the memory cap "
                          f"({MAX_RECORDED:.0e} values): pass a larger stride")
@@ -171,7 +181,7 @@ def simulate(setup, h, T, z0=None, stride=None, increments=False, t0=0.0, pt0=No
     start = time.perf_counter()
     status, done = kernel(setup.data, setup.P, float(t0), float(h), Z, PT, steps, stride, Trec, Zrec, PTrec, dZrec)
     wall = time.perf_counter() - start
-    kept = done // stride + 1
+    kept = records(done, stride) if status == OK else done // stride + 1
     traj = _trajectory(setup, h, stride, Trec[:kept], Zrec[:kept], PTrec[:kept],
                        dZrec[:kept] if increments else None, done, wall)
     if status != OK:

@@ -97,8 +97,8 @@ def compare(setup, h, T, delta=1e-4, cloud_points=0, cloud_radius=0.05, stride=N
         area = area / area[0]
     error = None
     if setup.scene.has_flow:
-        exact = simulate(Setup.make(setup.scene, "exact", setup.values), h * run.stride,
-                         run.steps * h, z0=base[None])
+        exact = simulate(Setup.make(setup.scene, "exact", setup.values), h, run.steps * h, z0=base[None],
+                         stride=run.stride)
         z_exact = exact.z[: len(run.t), 0]
         error = distance(run.z[:, 0], z_exact) / np.maximum(norm(z_exact), np.finfo(float).tiny)
     Pi = None

@@ -247,7 +247,7 @@ def test_the_energy_plot_starts_at_the_first_step_and_zeros_sit_below_the_data()
     assert np.array_equal(src["y"], np.maximum(np.abs(run.H_ext[1:, 0]), plotting.FLOOR))
     assert plotting.zero_floor([np.array([0.0, 1e-10]), np.array([3e-3])]) == plotting.FLOOR
     assert plotting.zero_floor([np.array([0.0, 0.0]), np.array([8e-45, 1e-44])]) == pytest.approx(8e-46)
-    x, y = plotting.series(np.arange(3.0), np.array([0.0, -8e-45, 2e-44]), logy=True, floor=8e-46)
+    _, y = plotting.series(np.arange(3.0), np.array([0.0, -8e-45, 2e-44]), logy=True, floor=8e-46)
     assert list(y) == [8e-46, 8e-45, 2e-44], "exact zeros at the floor, tiny values as they are"
 
 

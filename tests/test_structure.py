@@ -4,7 +4,7 @@ import pytest
 
 from conftest import case_id, pairs, setup, structure_preserving
 from cosymp.diagnostics import det_deviation, symplecticity_defect, tangent_maps
-from cosymp.integrate import simulate
+from cosymp.integrate import records, simulate
 
 ROUNDOFF = 1e-13
 LONG = 100_000
@@ -109,3 +109,15 @@ def test_matrix_path_agrees_with_member_path(case):
     scale = np.max(np.abs(run.z[:, 0]))
     assert np.max(np.abs(rec[1][:, 0] - run.z[:, 0])) < 1e-12 * scale * K
     assert np.max(np.abs(rec[2][:, 0] - run.pt[:, 0])) < 1e-12 * K
+
+
+@pytest.mark.parametrize("scene", ["damped", "kapitza"])
+def test_the_last_record_is_the_state_at_T_whatever_the_stride(scene):
+    """Record j is step j*stride, and the final step is always recorded: with stride 3 and 10
+    steps the records are steps 0, 3, 6, 9 and 10, each bit-identical to the every-step run's."""
+    s = setup(scene, "midpoint")
+    every = simulate(s, 0.01, 0.1, stride=1)
+    strided = simulate(s, 0.01, 0.1, stride=3)
+    assert every.steps == strided.steps == 10 and records(10, 3) == len(strided.t) == 5
+    assert np.array_equal(strided.t, every.t[[0, 3, 6, 9, 10]])
+    assert np.array_equal(strided.z, every.z[[0, 3, 6, 9, 10]]) and np.array_equal(strided.pt, every.pt[[0, 3, 6, 9, 10]])

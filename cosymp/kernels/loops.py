@@ -87,8 +87,8 @@ def propagate_matrix(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZre
 
     One step matrix (M, Q, s) per step (kernels.linear), applied to every member:
     z <- M z, p_t <- p_t - (z.Q z / 2 + s). Records every stride-th state (index j is step
-    j*stride, index 0 the start) and, when dZrec is non-empty, the increment z_k - z_(k-1) of
-    the step before each record. Returns (status, k): k steps completed; on failure step
+    j*stride, index 0 the start) and the final state (one more record when stride does not divide
+    nsteps) and, when dZrec is non-empty, the increment z_k - z_(k-1) of the step before each record. Returns (status, k): k steps completed; on failure step
     k -> k+1 failed and the records hold every recorded state before it.
     """
     D, P, Z, PT, Trec, Zrec, PTrec, dZrec = borrow((D, P, Z, PT, Trec, Zrec, PTrec, dZrec))
@@ -112,7 +112,7 @@ def propagate_matrix(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZre
             prev = e
         tk = t0 + k * h - tau
         s = lmatrix(D, P, C, tk, h, M, Q, LW)
-        recording = (k + 1) % stride == 0
+        recording = (k + 1) % stride == 0 or k + 1 == nsteps
         for i in range(Z.shape[0]):
             quad = 0.0
             for r in range(m):
@@ -160,7 +160,7 @@ def propagate_members(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZr
             up, down = _factors(e)
             prev = e
         tk = t0 + k * h - tau
-        recording = (k + 1) % stride == 0
+        recording = (k + 1) % stride == 0 or k + 1 == nsteps
         for i in range(Z.shape[0]):
             for r in range(m):
                 old[r] = Z[i, r]
