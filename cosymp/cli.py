@@ -145,7 +145,7 @@ def _run(args, out):
               f"  max |det M_k - 1|      = {res['det_max_dev']:.3e}",
               f"  max |M^T J M - J|      = {res['symp_max_dev']:.3e}"]
     if res["error_final"] is not None:
-        lines.append(f"  error at T vs {res['reference']} = {res['error_final']:.3e}")
+        lines.append(f"  relative error at T vs {res['reference']} = {res['error_final']:.3e}")
     lines.append(f"  integration time {res['wall_s']:.3f} s (total {res['wall_total_s']:.3f} s)")
     out.write("\n".join(lines) + "\n")
 

@@ -172,3 +172,18 @@ def test_the_lease_bounds_the_measured_peak_and_is_given_back(monkeypatch):
     print(f"stability map: lease {leased[-1] / 1e6:.0f} MB, peak {peak / 1e6:.0f} MB")
     assert peak <= leased[-1] <= 4 * peak
     assert math.ceil(60.0 / 1e-4) > wp.CHUNK
+
+
+def test_the_colour_bar_uses_the_apps_compact_ticks_and_cells_have_no_gaps():
+    """The colour bar read 1.000e-12 ... 0.000e+0 (Bokeh's default formatter) beside axes that
+    read 1e-12; the cells' edges are drawn in their own colour (white hairlines between them)."""
+    from bokeh.models import ColorBar
+
+    from app.plotting import LOG_TICKS, TICKS
+
+    for logz, code in ((False, TICKS), (True, LOG_TICKS)):
+        plot = maps.MapPlot(False, False, logz, lambda i, j: None)
+        bar = next(r for r in plot.fig.right if isinstance(r, ColorBar))
+        assert bar.formatter.code == code
+        glyph = plot.fig.renderers[0].glyph
+        assert glyph.line_color == glyph.fill_color and glyph.line_color.transform is plot.mapper

@@ -112,3 +112,15 @@ def test_console_entry_point_in_fresh_process():
     r = subprocess.run([sys.executable, "-m", "cosymp", "run", "damped", "--h", "-1"], check=False,
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "Traceback" not in r.stderr
+
+
+def test_run_gives_the_same_relative_error_as_the_comparison():
+    """`cosymp run` printed the absolute error (7.85 on damped, midpoint, h 0.1, T 50) where the app,
+    the reports and the sweeps give the relative one (0.125)."""
+    from cosymp.integrate import Setup
+    from cosymp.study import compare
+
+    code, out, err = run_cli("run", "damped", "--method", "midpoint", "--h", "0.1", "--T", "50", "--json")
+    assert code == 0, err
+    c = compare(Setup.make("damped", "midpoint"), 0.1, 50.0)
+    assert json.loads(out)["error_final"] == pytest.approx(float(c.error[-1]), rel=1e-9) == pytest.approx(0.125, abs=1e-3)

@@ -11,6 +11,7 @@ import pytest
 
 from cosymp.cli import main
 from cosymp.report import Figure, Report, Section, Series, envelope, render
+from cosymp.scenes import SCENES
 
 ROOT = Path(__file__).resolve().parent.parent
 ARTIFACTS = ROOT / "tests" / "artifacts"
@@ -142,3 +143,12 @@ def test_app_report_uses_the_views_runs():
     study = Study(scene="decaying", method="symplectic-euler")
     text = study_report(study)
     assert "cosymp report decaying --method symplectic-euler --vs rk4" in text and 'id="figures"' in text
+
+
+def test_the_volume_estimator_is_named_for_the_scenes_2n_plus_1_increments():
+    """The charged particle (two degrees of freedom) has five increments, not three."""
+    from cosymp.report.scene import volume_name
+
+    names = {name: volume_name(s) for name, s in SCENES.items()}
+    assert names["charged"] == "det[X¹ … X⁵]"
+    assert all(v == "det[X¹ X² X³]" for k, v in names.items() if SCENES[k].ndof == 1)

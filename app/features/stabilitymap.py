@@ -7,7 +7,14 @@ import os
 import numpy as np
 import panel as pn
 import param
-from bokeh.models import ColorBar, HoverTool, LinearColorMapper, LogColorMapper, TapTool
+from bokeh.models import (
+    ColorBar,
+    CustomJSTickFormatter,
+    HoverTool,
+    LinearColorMapper,
+    LogColorMapper,
+    TapTool,
+)
 from bokeh.palettes import Viridis256
 from bokeh.transform import transform
 
@@ -18,7 +25,7 @@ from cosymp.methods import METHODS
 from cosymp.scenes import SCENES
 
 from ..jobs import Job
-from ..plotting import FLOOR, figure, note, pane, source
+from ..plotting import FLOOR, LOG_TICKS, TICKS, figure, note, pane, source
 from ..study import soft_range, theta_for
 from .base import Feature, FeatureView
 from .workprecision import run_controls
@@ -224,8 +231,11 @@ class MapPlot:
         self.source = source()
         self.mapper = (LogColorMapper if logz else LinearColorMapper)(palette=Viridis256, nan_color="black")
         quads = self.fig.quad(left="left", right="right", bottom="bottom", top="top", source=self.source,
-                              fill_color=transform("z", self.mapper), line_color=None, nonselection_fill_alpha=1.0)
-        self.fig.add_layout(ColorBar(color_mapper=self.mapper, width=12), "right")
+                              fill_color=transform("z", self.mapper), line_color=transform("z", self.mapper),
+                              line_width=0.6, nonselection_fill_alpha=1.0, nonselection_line_alpha=1.0)
+        # Edges in the cell's own colour: without them anti-aliasing drew white hairlines between cells.
+        self.fig.add_layout(ColorBar(color_mapper=self.mapper, width=12,
+                                     formatter=CustomJSTickFormatter(code=LOG_TICKS if logz else TICKS)), "right")
         self.fig.add_tools(HoverTool(renderers=[quads], tooltips=[("x", "@x{0.[0000]}"), ("y", "@y{0.[0000]}"),
                                                                   ("value", "@z")]), TapTool(renderers=[quads]))
         self.source.selected.on_change("indices", lambda attr, old, new: new and on_tap(

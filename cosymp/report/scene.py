@@ -66,12 +66,20 @@ def scene_report(setups, h, T, cmd, progress=None, computed=None):
             "method keeps it bounded, a non-preserving one lets it drift).")], _orbit_figures(scene, ok)),
         Section("Structure", [
             ("|det M_k − 1| and ||M_kᵀ J M_k − J|| of the one-step tangent maps M_k (rigorous: round-off for a "
-            "structure-preserving method), and the paper's estimators as printed: ω(X¹, X²) and det[X¹ X² X³] "
+            f"structure-preserving method), and the paper's estimators as printed: ω(X¹, X²) and {volume_name(scene)} "
             "of the one-step increments of nearby trajectories (they follow the increments' size, so they are "
-            "not constant even for a symplectic map).")], _structure_figures(ok)),
+            "not constant even for a symplectic map).")], _structure_figures(scene, ok)),
     ]
     return Report(f"cosymp report: {scene.title}, {' vs '.join(s.method.label(s.theta) for s in setups)}",
                   [f"h = {h:g}, T = {T:g}."], sections, cmd)
+
+
+def volume_name(scene):
+    """The paper's volume estimator for the scene's 2n + 1 increments: det[X¹ X² X³] for one degree
+    of freedom, det[X¹ … X⁵] for two."""
+    k = 2 * scene.ndof + 1
+    sup = str.maketrans("0123456789", "⁰¹²³⁴⁵⁶⁷⁸⁹")
+    return "det[X¹ X² X³]" if k == 3 else f"det[X¹ … X{str(k).translate(sup)}]"
 
 
 def _numbers(s, c, failure, err):
@@ -105,7 +113,7 @@ def _orbit_figures(scene, runs):
     return figs
 
 
-def _structure_figures(runs):
+def _structure_figures(scene, runs):
     return [
         Figure("|det M_k − 1| of the one-step maps", "t", "|det M_k − 1|",
                _series(runs, lambda c: (c.run.t[:-1], c.det_dev)), logy=True,
@@ -114,6 +122,6 @@ def _structure_figures(runs):
                _series(runs, lambda c: (c.run.t[:-1], c.symp_dev)), logy=True),
         Figure("The paper's symplectic-form estimator ω(X¹, X²)", "t", "ω(X¹, X²)",
                _series(runs, lambda c: (c.run.t[1:], c.paper_omega))),
-        Figure("The paper's volume-form estimator det[X¹ X² X³]", "t", "det",
+        Figure(f"The paper's volume-form estimator {volume_name(scene)}", "t", "det",
                _series(runs, lambda c: (c.run.t[1:], c.paper_volume))),
     ]
