@@ -18,18 +18,18 @@ def window_max(run, part):
 
 @pytest.mark.parametrize("scene,values,T", LONG, ids=[s for s, _, _ in LONG])
 def test_extended_hamiltonian_bounded_vs_rk4_drift(scene, values, T):
-    """Over the paper's horizon (h = 0.1): the maximum of |H + p_t| in the last tenth equals that
-    of the first tenth for the symplectic methods (bounded oscillation, up to the round-off that
-    p_t accumulates, at most eps per step) and has grown about tenfold for RK4 (linear drift)."""
+    """Over the paper's horizon (h = 0.1): the maximum of |H + p_t| in the last tenth is within 5 %
+    of that of the first tenth for the symplectic methods (bounded oscillation; p_t is summed with
+    compensation, so its round-off no longer overtakes gauss4's 1e-10 oscillation: 1.6 on damped
+    before) and has grown about tenfold for RK4 (linear drift)."""
     windows = {}
-    for method in ("midpoint", "symplectic-euler", "gauss4", "rk4"):
+    for method in ("midpoint", "symplectic-euler", "gauss4", "composition4", "rk4"):
         run = simulate(setup(scene, method, **values), 0.1, T, stride=10)
         assert run.steps == round(T / 0.1)
         windows[method] = (window_max(run, "first"), window_max(run, "last"))
-    roundoff = 2.2e-16 * round(T / 0.1)
-    for method in ("midpoint", "symplectic-euler", "gauss4"):
+    for method in ("midpoint", "symplectic-euler", "gauss4", "composition4"):
         first, last = windows[method]
-        assert abs(last - first) < 0.1 * first + roundoff, windows
+        assert abs(last / first - 1) < 0.05, (method, windows)
     first, last = windows["rk4"]
     assert last > 5 * first, windows
 
