@@ -47,13 +47,18 @@ def test_the_plots_draw_every_finite_point_and_the_targets_table_names_the_ratio
     _, m, _ = measured
     plot = views.WorkPrecisionPlot("error", "", lambda row: None)
     plot.set(m.rows)
-    lines = {label: (src, r) for label, (src, r) in plot.curves.lines.items() if len(src.data["x"])}
-    styles = {label: r.glyph.line_dash for label, (_, r) in lines.items()}
+    drawn = [(src, r) for src, r in plot.curves.pool if len(src.data["x"])]
+    lines = {item.label.value: item.renderers[0] for item in plot.curves.legend.items}
+    assert [r for _, r in drawn] == list(lines.values()), "the legend lists exactly the drawn lines"
+    assert all(r in plot.fig.renderers for r in lines.values()), "lines are the figure's own, built with it"
+    styles = {label: r.glyph.line_dash for label, r in lines.items()}
     assert styles["rk4"] == [] and styles["scipy-DOP853"] == [6]  # solid, and Bokeh's "dashed"
     points = plot.points.data
-    assert len(points["x"]) == len(views.wp_points(m.rows, "error")) == sum(len(src.data["x"]) for src, _ in lines.values())
+    assert len(points["x"]) == len(views.wp_points(m.rows, "error")) == sum(len(src.data["x"]) for src, _ in drawn)
     assert set(points["marker"]) == {"circle", "square"}
-    assert [item.label.value for item in plot.curves.legend.items] == list(lines)
+    n_renderers = len(plot.fig.renderers)
+    plot.set(m.rows[:3])
+    assert len(plot.fig.renderers) == n_renderers, "new data adds no renderer to a figure on the page"
     table = views.targets_table(m.rows)
     assert "scipy DOP853 / fastest cosymp" in table["time to reach"] and "best symplectic / rk4" in table["time to reach"]
     cost = wp.targets(m.rows)["cost"][1e-6]["rk4"]

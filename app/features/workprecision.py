@@ -260,29 +260,31 @@ def wp_points(rows, key):
     return [r for r in rows if finite(r["wall_s"]) and finite(r[key])]
 
 
+POOL = 24  # curves a plot can show at once: every method, θ variants and scipy's solvers
+
+
 class Curves:
-    """Log-log curves, one per solver (created when a solver first appears, then kept), in the
-    solver's colour, scipy's dashed, with a legend beside the plot."""
+    """Log-log curves, one per solver, in the solver's colour, scipy's dashed, with a legend beside
+    the plot. Their POOL line renderers are built with the figure and reused: a renderer added to a
+    figure already on the page drew its line as a streak in the left margin (x at the canvas edge)."""
 
     def __init__(self, fig):
         self.fig = fig
-        self.lines = {}
+        self.pool = [(src := source(), fig.line("x", "y", source=src, line_width=1.5)) for _ in range(POOL)]
         self.legend = legend_outside(fig, [])  # built with the figure: one added later has no view
 
     def set(self, curves):
-        """curves: {label: (x, y, dashed, solver)} drawn in the solver's colour; every other curve
-        is emptied, and the legend lists these."""
-        for label, (src, _) in self.lines.items():
-            if label not in curves:
+        """curves: {label: (x, y, dashed, solver)} drawn in the solver's colour, the first POOL of
+        them; every other line is emptied, and the legend lists these."""
+        shown = list(curves.items())[:POOL]
+        for k, (src, r) in enumerate(self.pool):
+            if k < len(shown):
+                _, (x, y, dashed, solver) = shown[k]
+                r.glyph.update(line_color=method_color(solver), line_dash="dashed" if dashed else "solid")
+                src.data = {"x": np.asarray(x, float), "y": np.asarray(y, float)}
+            elif len(src.data["x"]):
                 src.data = {"x": np.empty(0), "y": np.empty(0)}
-        for label, (x, y, dashed, solver) in curves.items():
-            if label not in self.lines:
-                src = source()
-                self.lines[label] = (src, self.fig.line("x", "y", source=src, line_width=1.5))
-            src, r = self.lines[label]
-            r.glyph.update(line_color=method_color(solver), line_dash="dashed" if dashed else "solid")
-            src.data = {"x": np.asarray(x, float), "y": np.asarray(y, float)}
-        self.legend.items = [LegendItem(label=label, renderers=[self.lines[label][1]]) for label in curves]
+        self.legend.items = [LegendItem(label=label, renderers=[self.pool[k][1]]) for k, (label, _) in enumerate(shown)]
 
 
 class WorkPrecisionPlot:
