@@ -110,7 +110,7 @@ def figure(title, x_label="t", y_label="", logx=False, logy=False, height=HEIGHT
     for axis, log in ((fig.xaxis, logx), (fig.yaxis, logy)):
         axis.formatter = CustomJSTickFormatter(code=LOG_TICKS if log else TICKS)
         axis.axis_label_text_font_style = "normal"
-    fig.min_border_left = 60
+    fig.min_border_left = 78  # room for "1.2e-15" and the axis label when new data brings wider ticks
     return fig
 
 
