@@ -35,9 +35,9 @@ PLOTS_JS = """() => {
     }
     return out;
 }"""
-FORMAT_JS = """(ticks) => {
+FORMAT_JS = """(ticks, marker = "places") => {
     for (const doc of Bokeh.documents) for (const m of doc.all_models)
-        if (m.type === "CustomJSTickFormatter" && m.code.includes("places")) return m.doFormat(ticks, {loc: 0});
+        if (m.type === "CustomJSTickFormatter" && m.code.includes(marker)) return m.doFormat(ticks, {loc: 0});
     return null;
 }"""
 RANGE_JS = """() => { const out = []; function find(root) {
@@ -98,6 +98,8 @@ def test_03_tick_labels_are_compact_and_distinct(page):
     assert fmt([1 - 2 ** -52, 1, 1 + 2 ** -52]) == ["−2.22e-16", "1", "+2.22e-16"]
     assert len(set(fmt([2e-6, 2.0000001e-6, 2.0000002e-6]))) == 3
     assert fmt([0.999997, 0.999998, 0.999999, 1, 1.000001]) == ["−3e-6", "−2e-6", "−1e-6", "1", "+1e-6"]
+    log = page.page.evaluate(f"(ticks) => ({FORMAT_JS})(ticks, 'crowded')", [1e-17, 1e-16, 2e-16, 3e-16, 4e-16, 5e-16])
+    assert log == ["1e-17", "1e-16", "2e-16", "", "", "5e-16"], "log ticks inside a decade are thinned to 1, 2, 5"
     page.check()
 
 
