@@ -80,14 +80,16 @@ if (span > 0 && span < 1e-4 * big) {
     const better = sig(v) - sig(ref) || Math.abs(i - mid) - Math.abs(finite.indexOf(ref) - mid);
     if (better < 0) ref = v;
   });
-  if (tick === ref) return trim(alone(Math.abs(ref)) ? ref.toExponential(11) : ref.toPrecision(12));
+  const label = trim(alone(Math.abs(ref)) ? ref.toExponential(11) : ref.toPrecision(12));
+  if (tick === ref) return label;
   const d = Math.abs(tick - ref);
-  return (tick > ref ? "+" : "\\u2212") + fmt(d, step, alone(d));
+  // A short reference is written out (1−3e-6): a bare −3e-6 read as a value near zero.
+  return (label.length <= 4 ? label : "") + (tick > ref ? "+" : "\\u2212") + fmt(d, step, alone(d));
 }
 return fmt(tick, step, exp);
 """
 """Compact tick labels: 4e-4, 1e5, 2500; values that differ only in late digits as offsets from the
-roundest tick (1, +2e-16). (A model belongs to one page: each axis gets its own formatter.)"""
+roundest tick (1, 1+2e-16; a long reference is written once: 2.408e-11, +1e-14). (A model belongs to one page: each axis gets its own formatter.)"""
 LOG_TICKS = r"""
 if (!(tick > 0)) return "";
 const pos = ticks.filter((v) => v > 0);

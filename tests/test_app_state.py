@@ -245,6 +245,10 @@ def test_the_energy_plot_starts_at_the_first_step_and_zeros_sit_below_the_data()
     src = shown_figures(view).energy.sources["A"].data
     assert src["x"][0] == run.t[1] and len(src["x"]) == len(run.t) - 1
     assert np.array_equal(src["y"], np.maximum(np.abs(run.H_ext[1:, 0]), plotting.FLOOR))
+    error = shown_figures(view).error.sources["A"].data
+    assert error["x"][0] == run.t[1], "the relative error is 0 at t = 0 too: not drawn"
+    t, H = structure.PLOTS["energy"][3](s.results.entries[0].comparison)  # Theta lesson's and Play's H~
+    assert t[0] == run.t[1] and len(H) == len(run.t) - 1
     assert plotting.zero_floor([np.array([0.0, 1e-10]), np.array([3e-3])]) == plotting.FLOOR
     assert plotting.zero_floor([np.array([0.0, 0.0]), np.array([8e-45, 1e-44])]) == pytest.approx(8e-46)
     _, y = plotting.series(np.arange(3.0), np.array([0.0, -8e-45, 2e-44]), logy=True, floor=8e-46)

@@ -17,7 +17,7 @@ from cosymp.report.style import pair_colors
 from cosymp.summary import long_chunk, max_chunk
 
 from ..jobs import Job, Note
-from ..plotting import SLOTS, Pair, figure, grid, note, pane, series, swatch
+from ..plotting import SLOTS, Pair, figure, grid, note, pane, series, swatch, zero_floor
 from ..presets import long_horizon
 from ..study import DELTA
 from .base import Feature, FeatureView
@@ -223,8 +223,9 @@ class LongRunView(FeatureView):
         methods = [d["method"] for d in data.values()] + ["", ""]
         for key, p in self.plots.items():
             p.colors(methods[:2])
-            p.set({slot: series(*band(d, PLOTS[key][3]), logy=PLOTS[key][2])
-                   for slot, d in zip(SLOTS, data.values()) if len(d["t"])})
+            bands = {slot: band(d, PLOTS[key][3]) for slot, d in zip(SLOTS, data.values()) if len(d["t"])}
+            floor = zero_floor([y for _, y in bands.values()])
+            p.set({slot: series(t, y, logy=PLOTS[key][2], floor=floor) for slot, (t, y) in bands.items()})
         self.key.object = long_key(data)
 
 

@@ -58,7 +58,7 @@ class Figures:
         self.energy.set({slot: peaks(c.run.t[1:], np.abs(c.run.H_ext[1:, 0])) for slot, c in cs.items()})
         if self.error is not None:
             self.error.colors(names(runs))
-            self.error.set(over_time(runs, lambda c: (c.run.t, c.error), logy=True))
+            self.error.set(over_time(runs, lambda c: (c.run.t[1:], c.error[1:]), logy=True))  # 0 at t = 0
 
     def reset(self):
         for _, fig, _ in self.portraits:

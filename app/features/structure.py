@@ -25,7 +25,7 @@ SYMPLECTIC_TEXT = ("<h4>Symplectic form</h4><p class='doc'>The paper's estimator
 
 # (title, value label, log axis, the series of a comparison)
 PLOTS = {
-    "energy": ("H~ = H + p_t", "H + p_t", False, lambda c: (c.run.t, c.run.H_ext[:, 0])),
+    "energy": ("H~ = H + p_t", "H + p_t", False, lambda c: (c.run.t[1:], c.run.H_ext[1:, 0])),  # 0 at t = 0
     "paper_volume": ("paper's estimator: det[X¹ … X²ⁿ⁺¹]", "det[X1 ... X(2n+1)]", False,
                      lambda c: (c.run.t[1:], c.paper_volume)),
     "det": ("rigorous: |det M_k − 1|", "|det M - 1|", True, lambda c: (c.run.t[:-1], c.det_dev)),
