@@ -56,6 +56,8 @@ def test_the_plots_draw_every_finite_point_and_the_targets_table_names_the_ratio
     points = plot.points.data
     assert len(points["x"]) == len(views.wp_points(m.rows, "error")) == sum(len(src.data["x"]) for src, _ in drawn)
     assert set(points["marker"]) == {"circle", "square"}
+    assert set(points) == set(views.POINT_COLUMNS) == set(views.WorkPrecisionPlot("error", "", None).points.data), \
+        "the glyph's columns exist before the first data (else 'nonexistent field' console warnings)"
     n_renderers = len(plot.fig.renderers)
     plot.set(m.rows[:3])
     assert len(plot.fig.renderers) == n_renderers, "new data adds no renderer to a figure on the page"

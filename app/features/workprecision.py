@@ -287,6 +287,10 @@ class Curves:
         self.legend.items = [LegendItem(label=label, renderers=[self.pool[k][1]]) for k, (label, _) in enumerate(shown)]
 
 
+POINT_COLUMNS = ("x", "y", "solver", "run", "steps", "error_text", "wall_text", "H_text", "det_text", "color",
+                 "marker")
+
+
 class WorkPrecisionPlot:
     """key against wall time: a line per solver (its runs in order of refinement) and every point
     (hover: what the run was; a click on a cosymp point calls on_tap(row))."""
@@ -296,6 +300,9 @@ class WorkPrecisionPlot:
         self.fig = figure(title, "wall time (s)", WP_KEYS[key], logx=True, logy=True, height=HEIGHT)
         self.curves = Curves(self.fig)
         self.points = source()
+        # Every column the glyph and the hover read exists from the start (a missing one logged
+        # "nonexistent field" warnings in the console before the first data).
+        self.points.data = {k: [] for k in POINT_COLUMNS}
         dots = self.fig.scatter("x", "y", source=self.points, size=7, color="color", marker="marker",
                                 nonselection_alpha=1.0)
         self.fig.add_tools(HoverTool(renderers=[dots], tooltips=HOVER), TapTool(renderers=[dots]))
@@ -331,6 +338,7 @@ class DriftPlot:
         self.fig = figure(title, "horizon T", DRIFT_KEYS[key], logx=True, logy=True, height=HEIGHT)
         self.curves = Curves(self.fig)
         self.dots = source()
+        self.dots.data = {"x": [], "y": [], "color": []}
         self.fig.scatter("x", "y", source=self.dots, size=6, color="color")
         self.guides = {p: source() for p in (1, 2)}
         for p, src in self.guides.items():
