@@ -7,7 +7,8 @@ the reductions of long series (per-bin envelopes, rasterized portraits) live her
 
 Colours are the methods' own (cosymp.report.style), shared with the reports. Of two compared
 methods the first (A) is drawn solid and on top, the second (B) dashed beneath it, so both show
-where they overlap (A is slightly transparent, so a band A fills does not hide B).
+where they overlap (A is slightly transparent, so B shows where the orbits cross; a dense band of A
+still hides B).
 """
 import contextlib
 import html
@@ -33,7 +34,7 @@ from cosymp.report.style import pair_colors
 from cosymp.series import envelope, thin
 
 SLOTS = ("A", "B")
-A_ALPHA = 0.7  # A is drawn over B; where A's orbit fills a band, B still shows through it
+A_ALPHA = 0.7  # A is drawn over B, slightly transparent so B shows where they cross
 HEIGHT = 260
 POINTS = 1200  # a long series is reduced to this many points (per-bin minima and maxima)
 PATH_POINTS = 4000  # a phase portrait keeps this many points in order
@@ -75,11 +76,9 @@ if (span > 0 && span < 1e-4 * big) {
   // one nearest the middle among equals; the others are offsets from it.
   const sig = (v) => { for (let p = 1; p < 17; p++) if (Math.abs(Number(v.toPrecision(p)) - v) <= 1e-6 * step) return p; return 17; };
   const mid = Math.floor(finite.length / 2);
-  let ref = finite[mid];
-  finite.forEach((v, i) => {
-    const better = sig(v) - sig(ref) || Math.abs(i - mid) - Math.abs(finite.indexOf(ref) - mid);
-    if (better < 0) ref = v;
-  });
+  let at = mid;
+  finite.forEach((v, i) => { if ((sig(v) - sig(finite[at]) || Math.abs(i - mid) - Math.abs(at - mid)) < 0) at = i; });
+  const ref = finite[at];
   const label = trim(alone(Math.abs(ref)) ? ref.toExponential(11) : ref.toPrecision(12));
   if (tick === ref) return label;
   const d = Math.abs(tick - ref);
@@ -208,7 +207,7 @@ class Curves:
             self.active = active
             self.panel.objects = [pane(active.fig)]
         active.colors(names)
-        floor = zero_floor([y for _, y in data.values()])
+        floor = zero_floor([y for _, y in data.values()]) if active is self.log else FLOOR
         active.set({slot: series(t, y, logy=active is self.log, floor=floor) for slot, (t, y) in data.items()})
 
 
@@ -358,6 +357,7 @@ def katex_css():
     return css + "\n.katex span.katex-html { display: inline; }  /* Panel's katex.css hides it */\n"
 
 
+@cache
 def katex_fonts_css():
     """The @font-face rules of katex_css(), for the document (a shadow root's are not enough)."""
     return "\n".join(re.findall(r"@font-face\{[^}]*\}", katex_css()))

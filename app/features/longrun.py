@@ -224,7 +224,7 @@ class LongRunView(FeatureView):
         for key, p in self.plots.items():
             p.colors(methods[:2])
             bands = {slot: band(d, PLOTS[key][3]) for slot, d in zip(SLOTS, data.values()) if len(d["t"])}
-            floor = zero_floor([y for _, y in bands.values()])
+            floor = zero_floor([y for _, y in bands.values()]) if PLOTS[key][2] else None
             p.set({slot: series(t, y, logy=PLOTS[key][2], floor=floor) for slot, (t, y) in bands.items()})
         self.key.object = long_key(data)
 
