@@ -7,6 +7,7 @@ never reaches the results: it becomes a `Note` in `message` saying what to chang
 goes back to its last good value and the last good results stay. The views below it (the
 controls, the scene's description, the preset links) are shared by every tab.
 """
+import collections
 import dataclasses
 import html
 import math
@@ -26,7 +27,7 @@ from cosymp.scenes import SCENES
 from cosymp.study import compare_until_failure as study_until_failure
 
 from .jobs import Job, Note
-from .plotting import equation, note
+from .plotting import equation, note, push
 from .presets import HARD, PAPER, PRESETS, URL_NAMES, rounded
 from .warmup import FIRST_VIEW
 
@@ -345,8 +346,6 @@ class Controls(pn.viewable.Viewer):
         takes_theta = pn.bind(lambda m, o: METHODS[m].takes_theta or METHODS[o].takes_theta,
                               s.param.method, s.param.other)
         wide = {"sizing_mode": "stretch_width"}
-        params = pn.Column(scene_widgets(s.inputs), **wide, margin=0)
-        s.param.watch(lambda e: params.__setitem__(0, scene_widgets(e.new)), "inputs")
         return pn.Column(
             pn.widgets.Select.from_param(s.param.scene, name="Scene", **wide),
             pn.widgets.Select.from_param(s.param.method, name="Method", **wide),
@@ -355,59 +354,150 @@ class Controls(pn.viewable.Viewer):
             pn.Row(pn.widgets.FloatInput.from_param(s.param.h, name="Step h", format="0.[000000]", **wide),
                    pn.widgets.FloatInput.from_param(s.param.T, name="Horizon T", **wide), **wide),
             note("<h4>Scene parameters</h4>", margin=(10, 5, 0, 5)),
-            params,
+            SceneControls(study=s),
             **wide,
         )
 
 
-def scene_widgets(inputs):
-    """Widgets for a scene-inputs object: a slider with a text box for each number (the slider
-    spans a range around the default; any value within the bounds can be typed), a select for
-    choices, a text input (applied on Enter) for beta(t)."""
-    widgets = []
-    for name in (n for n in inputs.param if n != "name"):
-        p = inputs.param[name]
-        if isinstance(p, param.Selector):
-            w = pn.widgets.Select.from_param(p, description=p.doc, sizing_mode="stretch_width")
-        elif isinstance(p, param.String):
-            label = f"{name}(t): 'paper', 'constant' or an expression of t"
-            w = pn.widgets.TextInput.from_param(p, name=label, description=p.doc, sizing_mode="stretch_width",
-                                                placeholder="e.g. 0.05*(1 + tanh(t)), then Enter")
-        else:
-            w = number_control(inputs, name)
-        widgets.append(w)
-    return pn.Column(*widgets, sizing_mode="stretch_width", margin=0)
+def kind(p):
+    """The kind of control a scene parameter takes."""
+    if isinstance(p, param.Selector):
+        return ChoiceControl
+    return TextControl if isinstance(p, param.String) else NumberControl
 
 
-def number_control(inputs, name):
+class SceneControls(pn.viewable.Viewer):
+    """A control for each of the scene's parameters: a slider with a text box for each number (the
+    slider spans a range around the default; any value can be typed), a select for choices, a text
+    input (applied on Enter) for beta(t).
+
+    The controls are a fixed pool, as many of each kind as the scene with the most of them needs,
+    rebound in place when the scene changes: new widgets cost the server 0.2 s and the browser a
+    layout of the sidebar (115 kB of models and about 0.3 s for charged)."""
+
+    study = param.ClassSelector(class_=Study)
+
+    def __init__(self, **params):
+        super().__init__(**params)
+        need = {}
+        for key, s in SCENES.items():
+            for k, n in collections.Counter(kind(inputs_class(key).param[p.name]) for p in s.params).items():
+                need[k] = max(need.get(k, 0), n)
+        self.pool = {k: [k() for _ in range(n)] for k, n in need.items()}
+        self._column = pn.Column(sizing_mode="stretch_width", margin=0)
+        self._bind(self.study.inputs)
+        self.study.param.watch(lambda e: push(lambda: self._bind(e.new)), "inputs")  # one message
+
+    def __panel__(self):
+        return self._column
+
+    def shown(self):
+        """The controls bound to the scene's parameters, in the scene's order."""
+        return [c for c in self._order if c.name is not None]
+
+    def _bind(self, inputs):
+        free = {k: list(v) for k, v in self.pool.items()}
+        order = []
+        for name in (n for n in inputs.param if n != "name"):
+            control = free[kind(inputs.param[name])].pop(0)
+            control.bind(inputs, name)
+            order.append(control)
+        for control in (c for v in free.values() for c in v):
+            control.unbind()
+            order.append(control)
+        self._order = order
+        layouts = [c.layout for c in order]
+        if layouts != list(self._column.objects):
+            self._column.objects = layouts
+
+
+class Control:
+    """One pooled control: bound to a parameter of a scene's inputs (and shown), or unbound."""
+
+    def __init__(self, layout, labelled):
+        self.layout = layout
+        self.labelled = labelled  # the widget carrying the label
+        self.inputs = self.name = None
+
+    def bind(self, inputs, name):
+        self.inputs = self.name = None  # no write to the old or new inputs while rebinding
+        self.show(inputs, name)
+        self.layout.visible = True
+        inputs.param.watch(self._follow, name)
+        self.inputs, self.name = inputs, name
+
+    def unbind(self):
+        """Hidden, and unlabelled (a hidden "q0" beside the shown one would make two)."""
+        if self.name is not None:
+            self.labelled.label = ""
+        self.inputs = self.name = None
+        self.layout.visible = False
+
+    def _follow(self, event):
+        if event.obj is self.inputs and event.name == self.name:
+            self.show(self.inputs, self.name)
+
+    def take(self, value):
+        if self.inputs is not None and value != getattr(self.inputs, self.name):
+            setattr(self.inputs, self.name, value)
+
+    def show(self, inputs, name):
+        raise NotImplementedError
+
+
+class NumberControl(Control):
     """A slider over the parameter's soft range and a box that takes any value; the slider widens
     to a typed value outside its range.
 
     Not Panel's EditableFloatSlider: in Panel 1.9 its JavaScript callback sits in a global
     registry whose entry refers back to the widget, so every one stays alive, and with it the
     inputs it shows, the Study watching them and the closed session's results."""
-    p = inputs.param[name]
-    lo, hi = p.softbounds
-    value = getattr(inputs, name)
-    slider = pn.widgets.FloatSlider(label=p.label, start=min(lo, value), end=max(hi, value), step=p.step,
-                                    value=value, format="0.[00000]", sizing_mode="stretch_width")
-    # No start or end on the box (Panel would take the slider's range): a typed value outside the
-    # scene's bounds must reach the study, which says what is wrong and puts the last good value back.
-    box = pn.widgets.FloatInput.from_param(p, name="", format="0.[00000]", width=100, align="end",
-                                           description=p.doc, start=None, end=None)
 
-    def show(event):
-        v = getattr(inputs, name)  # not event.new: a refused value has been put back meanwhile
-        if math.isfinite(v) and v != slider.value:
-            slider.param.update(start=min(slider.start, v), end=max(slider.end, v), value=v)
+    def __init__(self):
+        self.slider = pn.widgets.FloatSlider(start=0.0, end=1.0, value=0.0, format="0.[00000]",
+                                             sizing_mode="stretch_width")
+        # No start or end on the box: a typed value outside the scene's bounds must reach the
+        # study, which says what is wrong and puts the last good value back.
+        self.box = pn.widgets.FloatInput(label="", format="0.[00000]", width=100, align="end")
+        super().__init__(pn.Row(self.slider, self.box, sizing_mode="stretch_width", margin=0), self.slider)
+        self.slider.param.watch(lambda e: self.take(e.new), "value")
+        self.box.param.watch(lambda e: self.take(e.new), "value")
 
-    def take(event):
-        if event.new != getattr(inputs, name):
-            setattr(inputs, name, event.new)
+    def show(self, inputs, name):
+        v = getattr(inputs, name)  # not the event's value: a refused one has been put back meanwhile
+        p = inputs.param[name]
+        if name != self.name:
+            lo, hi = p.softbounds
+            self.slider.param.update(label=p.label, start=min(lo, v), end=max(hi, v), step=p.step, value=v)
+            self.box.param.update(value=v, description=p.doc)
+        elif math.isfinite(v):
+            self.slider.param.update(start=min(self.slider.start, v), end=max(self.slider.end, v), value=v)
+            self.box.value = v
 
-    inputs.param.watch(show, name)
-    slider.param.watch(take, "value")
-    return pn.Row(slider, box, name=name, sizing_mode="stretch_width", margin=0)
+
+class TextControl(Control):
+    def __init__(self):
+        self.widget = pn.widgets.TextInput(sizing_mode="stretch_width",
+                                           placeholder="e.g. 0.05*(1 + tanh(t)), then Enter")
+        super().__init__(self.widget, self.widget)
+        self.widget.param.watch(lambda e: self.take(e.new), "value")
+
+    def show(self, inputs, name):
+        p = inputs.param[name]
+        self.widget.param.update(label=f"{name}(t): 'paper', 'constant' or an expression of t",
+                                 description=p.doc, value=getattr(inputs, name))
+
+
+class ChoiceControl(Control):
+    def __init__(self):
+        self.widget = pn.widgets.Select(sizing_mode="stretch_width")
+        super().__init__(self.widget, self.widget)
+        self.widget.param.watch(lambda e: self.take(e.new), "value")
+
+    def show(self, inputs, name):
+        p = inputs.param[name]
+        self.widget.param.update(label=p.label, description=p.doc, options=list(p.objects),
+                                 value=getattr(inputs, name))
 
 
 class SceneInfo(pn.viewable.Viewer):

@@ -85,17 +85,23 @@ def test_values_and_inputs_follow_each_other():
     assert s.values == {"gamma": -0.1}
 
 
-def test_switching_scenes_rebuilds_the_controls_and_the_portraits():
+def test_switching_scenes_rebinds_the_controls_and_rebuilds_the_portraits():
     s = Study(scene="damped")
     view = drawn(orbits.OrbitsView(s))
+    controls = study.SceneControls(study=s)
+    pool = {id(c) for cs in controls.pool.values() for c in cs}
     s.values = {"gamma": 0.3}
     s.scene = "charged"
     names = [p.name for p in SCENES["charged"].params]
     assert [n for n in s.inputs.param if n != "name"] == names
     assert (s.h, s.T, s.values) == (SCENES["charged"].h, SCENES["charged"].T, {})
-    widgets = study.scene_widgets(s.inputs)
-    labels = [w.name for w in widgets]
-    assert len(labels) == len(names) and labels[5].startswith("beta(t)") and labels[6] == "gauge"
+    shown = controls.shown()
+    assert [c.name for c in shown] == names and {id(c) for c in shown} <= pool  # no new widgets
+    assert isinstance(shown[5], study.TextControl) and shown[5].widget.label.startswith("beta(t)")
+    assert isinstance(shown[6], study.ChoiceControl) and shown[6].widget.options == list(
+        next(p for p in SCENES["charged"].params if p.name == "gauge").choices)
+    assert shown[2].slider.label == "B0" and shown[2].slider.value == s.inputs.B0 == 0.05
+    assert [o.visible for o in controls.__panel__().objects] == [True] * len(names) + [False] * (len(pool) - len(names))
     assert s.results.scene == "charged" and not s.results.dense
     assert len(common.phase_axes("charged")) == 3
     assert view._shown == ("charged", False, False) and len(view.grid.objects) == 4
@@ -103,8 +109,9 @@ def test_switching_scenes_rebuilds_the_controls_and_the_portraits():
 
 def test_a_number_control_follows_its_parameter_both_ways_and_widens_to_typed_values():
     s = Study(scene="damped")
-    slider, box = study.scene_widgets(s.inputs)[2]
-    assert slider.name == "gamma" and (slider.start, slider.end) == s.inputs.param.gamma.softbounds
+    gamma = study.SceneControls(study=s).shown()[2]
+    slider, box = gamma.slider, gamma.box
+    assert slider.label == "gamma" and (slider.start, slider.end) == s.inputs.param.gamma.softbounds
     slider.value = 0.5
     assert s.inputs.gamma == 0.5 and box.value == 0.5
     box.value = 7.5
@@ -115,7 +122,8 @@ def test_a_number_control_follows_its_parameter_both_ways_and_widens_to_typed_va
 
 def test_an_out_of_range_typed_value_is_refused_and_the_box_shows_the_last_good_one():
     s = Study(scene="damped")
-    slider, box = study.scene_widgets(s.inputs)[2]
+    gamma = study.SceneControls(study=s).shown()[2]
+    slider, box = gamma.slider, gamma.box
     good = s.results
     box.value = 1e6
     assert s.message.level == "error" and "gamma" in s.message.text and "outside [-10, 10]" in s.message.text
@@ -128,8 +136,8 @@ def test_discarded_controls_do_not_keep_the_study_alive():
     session's Study (and its results) with it; the controls now used are collected."""
     s = Study(scene="modulated")
     ref = weakref.ref(s)
-    controls = study.scene_widgets(s.inputs)
-    assert len(controls) == len(SCENES["modulated"].params)
+    controls = study.SceneControls(study=s)
+    assert len(controls.shown()) == len(SCENES["modulated"].params)
     s = controls = None
     gc.collect()
     assert ref() is None
