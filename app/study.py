@@ -371,20 +371,24 @@ class SceneControls(pn.viewable.Viewer):
     slider spans a range around the default; any value can be typed), a select for choices, a text
     input (applied on Enter) for beta(t).
 
-    The controls are a fixed pool, as many of each kind as the scene with the most of them needs,
-    rebound in place when the scene changes: new widgets cost the server 0.2 s and the browser a
-    layout of the sidebar (115 kB of models and about 0.3 s for charged)."""
+    The controls are a fixed pool, rebound in place when the scene changes: at each position, one
+    control of each kind some scene has there, so that no scene reorders them. New widgets cost
+    the server 0.2 s and the browser a layout of the sidebar (115 kB of models for charged), and a
+    reordered column re-renders its children."""
 
     study = param.ClassSelector(class_=Study)
 
     def __init__(self, **params):
         super().__init__(**params)
-        need = {}
+        kinds = collections.defaultdict(list)
         for key, s in SCENES.items():
-            for k, n in collections.Counter(kind(inputs_class(key).param[p.name]) for p in s.params).items():
-                need[k] = max(need.get(k, 0), n)
-        self.pool = {k: [k() for _ in range(n)] for k, n in need.items()}
-        self._column = pn.Column(sizing_mode="stretch_width", margin=0)
+            for i, p in enumerate(s.params):
+                k = kind(inputs_class(key).param[p.name])
+                if k not in kinds[i]:
+                    kinds[i].append(k)
+        self.pool = [{k: k() for k in kinds[i]} for i in range(len(kinds))]
+        self._column = pn.Column(*[c.layout for at in self.pool for c in at.values()],
+                                 sizing_mode="stretch_width", margin=0)
         self._bind(self.study.inputs)
         self.study.param.watch(lambda e: push(lambda: self._bind(e.new)), "inputs")  # one message
 
@@ -393,22 +397,17 @@ class SceneControls(pn.viewable.Viewer):
 
     def shown(self):
         """The controls bound to the scene's parameters, in the scene's order."""
-        return [c for c in self._order if c.name is not None]
+        return [c for at in self.pool for c in at.values() if c.name is not None]
 
     def _bind(self, inputs):
-        free = {k: list(v) for k, v in self.pool.items()}
-        order = []
-        for name in (n for n in inputs.param if n != "name"):
-            control = free[kind(inputs.param[name])].pop(0)
-            control.bind(inputs, name)
-            order.append(control)
-        for control in (c for v in free.values() for c in v):
-            control.unbind()
-            order.append(control)
-        self._order = order
-        layouts = [c.layout for c in order]
-        if layouts != list(self._column.objects):
-            self._column.objects = layouts
+        names = [n for n in inputs.param if n != "name"]
+        for i, at in enumerate(self.pool):
+            chosen = kind(inputs.param[names[i]]) if i < len(names) else None
+            for k, control in at.items():
+                if k is chosen:
+                    control.bind(inputs, names[i])
+                else:
+                    control.unbind()
 
 
 class Control:

@@ -33,7 +33,7 @@ def plotted(pair):
 
 
 def shown_figures(view):
-    return view._figures[view._shown]
+    return view._figures[orbits.shape(*view._shown)]
 
 
 def test_a_parameter_change_changes_the_plotted_data():
@@ -89,22 +89,48 @@ def test_switching_scenes_rebinds_the_controls_and_rebuilds_the_portraits():
     s = Study(scene="damped")
     view = drawn(orbits.OrbitsView(s))
     controls = study.SceneControls(study=s)
-    pool = {id(c) for cs in controls.pool.values() for c in cs}
+    pool = [c for at in controls.pool for c in at.values()]
+    column = list(controls.__panel__().objects)
     s.values = {"gamma": 0.3}
     s.scene = "charged"
     names = [p.name for p in SCENES["charged"].params]
     assert [n for n in s.inputs.param if n != "name"] == names
     assert (s.h, s.T, s.values) == (SCENES["charged"].h, SCENES["charged"].T, {})
     shown = controls.shown()
-    assert [c.name for c in shown] == names and {id(c) for c in shown} <= pool  # no new widgets
+    assert [c.name for c in shown] == names and {id(c) for c in shown} <= set(map(id, pool))  # no new widgets
+    assert list(controls.__panel__().objects) == column, "nor a reordered column"
     assert isinstance(shown[5], study.TextControl) and shown[5].widget.label.startswith("beta(t)")
     assert isinstance(shown[6], study.ChoiceControl) and shown[6].widget.options == list(
         next(p for p in SCENES["charged"].params if p.name == "gauge").choices)
     assert shown[2].slider.label == "B0" and shown[2].slider.value == s.inputs.B0 == 0.05
-    assert [o.visible for o in controls.__panel__().objects] == [True] * len(names) + [False] * (len(pool) - len(names))
+    assert [o.visible for o in column] == [True] * len(names)
     assert s.results.scene == "charged" and not s.results.dense
     assert len(common.phase_axes("charged")) == 3
     assert view._shown == ("charged", False, False) and len(view.grid.objects) == 4
+    portraits = shown_figures(view).portraits
+    assert [f.title.text for _, f, _ in portraits] == [t for *_, t in common.phase_axes("charged")]
+    s.scene = "damped"
+    assert [o.visible for o in column] == [True] * 5 + [False] * (len(names) - 5)
+    assert [c.labelled.label for c in pool if not c.layout.visible] == [""] * (len(names) - 5)
+
+
+def test_scenes_of_one_shape_share_the_portraits_relabelled_with_fresh_ranges():
+    s = Study(scene="damped")
+    view = drawn(orbits.OrbitsView(s))
+    figs = shown_figures(view)
+    fig = figs.portraits[0][1]
+    first = fig.x_range
+    s.scene = "modulated"
+    assert shown_figures(view) is figs and fig.x_range is not first, "the same figures, not the zoom"
+    assert list(view.grid.objects) == figs.panes[:-1], "no error plot without an exact flow"
+    s.scene = "decaying"
+    assert shown_figures(view) is figs and list(view.grid.objects) == figs.panes
+    assert fig.yaxis.axis_label == "p" and "phase portrait" in fig.title.text
+    s.scene = "charged"
+    assert shown_figures(view) is not figs and fig.title.text == "phase portrait (q, p), dot: start"
+    s.scene = "kapitza"
+    assert shown_figures(view) is figs and plotted(figs.portraits[0][2]).size > 0
+    assert list(view.grid.objects) == figs.panes[:-1]
 
 
 def test_a_number_control_follows_its_parameter_both_ways_and_widens_to_typed_values():

@@ -25,23 +25,40 @@ def apart(runs):
     return len(sizes) == 2 and min(sizes) > 0 and max(sizes) > APART * min(sizes)
 
 
-class Figures:
-    """The figures of one layout: the scene's portraits (lines, or rasters when dense; one per
-    method when their sizes are far apart), max |H~| per bin and, with an exact flow, the error."""
+def shape(scene, dense, split):
+    """What a layout's figures depend on: scenes of one shape share them, relabelled (a new figure
+    costs the server 10-20 ms and the browser a layout of the page)."""
+    return len(phase_axes(scene)), dense, split
 
-    def __init__(self, scene, dense, split):
-        self.axes = phase_axes(scene)
+
+class Figures:
+    """The figures of one layout shape: the portraits (lines, or rasters when dense; one per
+    method when their sizes are far apart), max |H~| per bin and the error (shown for scenes with
+    an exact flow). `label(scene)` titles them for a scene."""
+
+    def __init__(self, portraits, dense, split):
         self.split = split
+        self.scene = None
         self.portraits = []
-        for _, _, xl, yl, title in self.axes:
+        for _ in range(portraits):
             for slot in (SLOTS if split else (None,)):
-                fig = figure(title if slot is None else f"{slot}: {title}", xl, yl)
+                fig = figure("")
                 self.portraits.append((slot, fig, Raster(fig) if dense else Pair(fig, start=True)))
         self.energy = Pair(figure("max |H + p_t| per bin (exact: 0)", "t", "|H + p_t|", logy=True))
-        self.error = Pair(figure("relative error |z − z_exact| / |z_exact|", "t", "relative error", logy=True)) \
-            if SCENES[scene].has_flow else None
-        figs = [f for _, f, _ in self.portraits] + [self.energy.fig] + ([self.error.fig] if self.error else [])
-        self.panes = [pane(f) for f in figs]
+        self.error = Pair(figure("relative error |z − z_exact| / |z_exact|", "t", "relative error", logy=True))
+        self.panes = [pane(f) for f in [f for _, f, _ in self.portraits] + [self.energy.fig, self.error.fig]]
+
+    def label(self, scene):
+        """Titles and axis labels for the scene's portraits, and fresh ranges for its data."""
+        self.scene = scene
+        self.axes = phase_axes(scene)
+        per_axis = len(SLOTS) if self.split else 1
+        for k, (slot, fig, _) in enumerate(self.portraits):
+            _, _, xl, yl, title = self.axes[k // per_axis]
+            fig.title.text = title if slot is None else f"{slot}: {title}"
+            fig.xaxis.axis_label, fig.yaxis.axis_label = xl, yl
+        self.reset()
+        self.shown = self.panes if SCENES[scene].has_flow else self.panes[:-1]
 
     def update(self, runs):
         cs = comparisons(runs)
@@ -56,7 +73,7 @@ class Figures:
         # From the first step: H + p_t is 0 by construction at t = 0, and drawn at FLOOR it stretched
         # the log axis over a dozen empty decades.
         self.energy.set({slot: peaks(c.run.t[1:], np.abs(c.run.H_ext[1:, 0])) for slot, c in cs.items()})
-        if self.error is not None:
+        if SCENES[runs.scene].has_flow:
             self.error.colors(names(runs))
             self.error.set(over_time(runs, lambda c: (c.run.t[1:], c.error[1:]), logy=True))  # 0 at t = 0
 
@@ -64,8 +81,7 @@ class Figures:
         for _, fig, _ in self.portraits:
             reset_ranges(fig)
         for p in (self.energy, self.error):
-            if p is not None:
-                reset_ranges(p.fig)
+            reset_ranges(p.fig)
 
 
 class OrbitsView(FeatureView):
@@ -87,14 +103,15 @@ class OrbitsView(FeatureView):
         if runs is None:
             return
         which = (runs.scene, runs.dense, apart(runs))
-        figs = self._figures.get(which)
+        figs = self._figures.get(shape(*which))
         if figs is None:
-            figs = self._figures[which] = Figures(*which)
+            figs = self._figures[shape(*which)] = Figures(*shape(*which))
+        if self._shown is None or self._shown[0] != runs.scene or figs.scene != runs.scene:
+            figs.label(runs.scene)
+        if figs.shown != list(self.grid.objects):
+            self.grid.ncols = 3 if len(figs.shown) in (3, 6) else 2
+            self.grid.objects = list(figs.shown)
         if which != self._shown:
-            if self._shown is None or self._shown[0] != runs.scene:
-                figs.reset()
-            self.grid.ncols = 3 if len(figs.panes) in (3, 6) else 2
-            self.grid.objects = list(figs.panes)
             self._shown = which
             self.remark.object = "" if SCENES[runs.scene].has_flow else (
                 f"<p class='doc'>No closed-form flow for '{runs.scene}', so no error plot (the command line's "
