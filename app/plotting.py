@@ -133,18 +133,20 @@ def source():
 
 class Pair:
     """The two compared methods' curves (A solid on top, B dashed beneath) on one figure, with an
-    optional marker of each curve's first point (`start`) or of every point (`dots`).
+    optional marker of each curve's first point (`start`) or of every point (`dots`). A is drawn
+    translucent, so that B shows where they cross. An `emphasis` (a part of the curves drawn bold
+    over them) draws A opaque and B's dashes over it, so that both show where they coincide.
     `colors(names)` colours them by their methods, `set(data)` replaces their data."""
 
-    def __init__(self, fig, width=1.8, start=False, dots=False):
+    def __init__(self, fig, width=1.8, start=False, dots=False, emphasis=False):
         self.fig = fig
         self.sources = {slot: source() for slot in SLOTS}
         self.starts = {slot: source() for slot in SLOTS} if start else {}
         self.lines, self.marks = {}, {}
-        for slot in reversed(SLOTS):
+        for slot in SLOTS if emphasis else reversed(SLOTS):
             self.lines[slot] = fig.line("x", "y", source=self.sources[slot], line_width=width,
                                         line_dash="dashed" if slot == "B" else "solid",
-                                        line_alpha=A_ALPHA if slot == "A" else 1.0)
+                                        line_alpha=A_ALPHA if slot == "A" and not emphasis else 1.0)
             if dots:
                 self.marks[slot + "."] = fig.scatter("x", "y", source=self.sources[slot], size=4)
             if start:

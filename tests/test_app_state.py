@@ -2,6 +2,7 @@
 validation, the follower views, the long run, presets, and the memory budget."""
 import gc
 import json
+import math
 import pathlib
 import re
 import weakref
@@ -127,7 +128,7 @@ def test_scenes_of_one_shape_share_the_portraits_relabelled_with_fresh_ranges():
     assert shown_figures(view) is figs and list(view.grid.objects) == figs.panes
     assert fig.yaxis.axis_label == "p" and "phase portrait" in fig.title.text
     s.scene = "charged"
-    assert shown_figures(view) is not figs and fig.title.text == "phase portrait (q, p), dot: start"
+    assert shown_figures(view) is not figs and fig.title.text == f"phase portrait (q, p); {common.PORTRAIT_MARKS}"
     s.scene = "kapitza"
     assert shown_figures(view) is figs and plotted(figs.portraits[0][2]).size > 0
     assert list(view.grid.objects) == figs.panes[:-1]
@@ -248,6 +249,26 @@ def test_numbers_table_is_the_full_resolution_summary():
     assert next(iter(cols)) == "h = 0.001, T = 20"
     view = drawn(orbits.OrbitsView(s))
     assert list(view.table.object[label]) == cols[label]
+
+
+def test_portraits_draw_where_each_method_ends_bold_with_b_dashed_over_a():
+    """A long run's orbits fill one band, and A drawn over B hid B: the last TAIL of each orbit is
+    drawn bold on top, B's dashes over A, on line and raster portraits alike."""
+    s = Study()
+    view = drawn(orbits.OrbitsView(s))
+    for dense in (False, True):
+        figs = shown_figures(view)
+        for (_, fig, _), last in zip(figs.portraits, figs.tails):
+            order = [r for r in fig.renderers if r in last.lines.values()]
+            assert order == [last.lines["A"], last.lines["B"]] and order == fig.renderers[-2:]
+            assert last.lines["B"].glyph.line_dash == [6] and last.lines["A"].glyph.line_alpha == 1.0
+        for slot, c in common.comparisons(s.results).items():
+            q = c.run.q[:, 0, 0]
+            k = math.ceil(common.TAIL * len(q))
+            assert np.array_equal(figs.tails[0].sources[slot].data["x"], plotting.path(q[-k:], q[-k:])[0])
+        if not dense:
+            s.T = 25000.0  # 125000 steps: rasterized
+            assert s.results.dense
 
 
 def test_series_are_downsampled_and_dense_portraits_rasterized():

@@ -90,14 +90,25 @@ def numbers(runs):
     return cols
 
 
+TAIL = 0.02  # the last part of a run drawn bold over its whole orbit in the portraits
+PORTRAIT_MARKS = f"dot: start, bold: last {TAIL:.0%}"
+
+
+def tail(x, y):
+    """The last TAIL of an orbit (at least two points): where each method ends up, visible even
+    when the whole orbits fill the same band."""
+    k = max(2, int(np.ceil(TAIL * len(x))))
+    return x[-k:], y[-k:]
+
+
 def phase_axes(scene):
     """(x index, y index, x label, y label, title) of the scene's phase portraits in z = (q, p)."""
     s = SCENES[scene]
     n = s.ndof
     names_ = list(s.coordinates)
     if n == 1:
-        return [(0, 1, "q", "p", "phase portrait (q, p), dot: start")]
-    return [(0, 1, names_[0], names_[1], f"orbit ({names_[0]}, {names_[1]}), dot: start")] + [
+        return [(0, 1, "q", "p", f"phase portrait (q, p); {PORTRAIT_MARKS}")]
+    return [(0, 1, names_[0], names_[1], f"orbit ({names_[0]}, {names_[1]}); {PORTRAIT_MARKS}")] + [
         (i, n + i, names_[i], f"p_{names_[i]}", f"({names_[i]}, p_{names_[i]})") for i in range(n)]
 
 

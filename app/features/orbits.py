@@ -8,7 +8,7 @@ from cosymp.scenes import SCENES
 
 from ..plotting import SLOTS, Pair, Raster, figure, grid, note, pane, path, peaks, reset_ranges, table
 from .base import Feature, FeatureView
-from .common import color_key, comparisons, names, numbers, over_time, phase_axes, verdict, zcols
+from .common import color_key, comparisons, names, numbers, over_time, phase_axes, tail, verdict, zcols
 
 NUMBERS_TEXT = "<h4>Numbers</h4><p class='doc'>From the full-resolution runs: maxima over every step.</p>"
 APART = 1e3  # two orbits whose sizes differ by more than this are drawn in portraits of their own
@@ -40,10 +40,12 @@ class Figures:
         self.split = split
         self.scene = None
         self.portraits = []
+        self.tails = []
         for _ in range(portraits):
             for slot in (SLOTS if split else (None,)):
                 fig = figure("")
                 self.portraits.append((slot, fig, Raster(fig) if dense else Pair(fig, start=True)))
+                self.tails.append(Pair(fig, width=3.2, emphasis=True))
         self.energy = Pair(figure("max |H + p_t| per bin (exact: 0)", "t", "|H + p_t|", logy=True))
         self.error = Pair(figure("relative error |z − z_exact| / |z_exact|", "t", "relative error", logy=True))
         self.panes = [pane(f) for f in [f for _, f, _ in self.portraits] + [self.energy.fig, self.error.fig]]
@@ -63,12 +65,14 @@ class Figures:
     def update(self, runs):
         cs = comparisons(runs)
         per_axis = len(SLOTS) if self.split else 1
-        for k, (slot, _, drawn) in enumerate(self.portraits):
+        for k, ((slot, _, drawn), last) in enumerate(zip(self.portraits, self.tails)):
             i, j = self.axes[k // per_axis][:2]
             drawn.colors(names(runs))
+            last.colors(names(runs))
             shown = {s: c for s, c in cs.items() if slot is None or s == slot}
             drawn.set({s: (zcols(c.run, i, j) if isinstance(drawn, Raster) else path(*zcols(c.run, i, j)))
                        for s, c in shown.items()})
+            last.set({s: path(*tail(*zcols(c.run, i, j))) for s, c in shown.items()})
         self.energy.colors(names(runs))
         # From the first step: H + p_t is 0 by construction at t = 0, and drawn at FLOOR it stretched
         # the log axis over a dozen empty decades.
