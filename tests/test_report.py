@@ -1,7 +1,9 @@
 """Static HTML reports: built by the CLI (and the app's state), opened from disk in headless
 Chromium with every network request blocked and counted."""
 import io
+import itertools
 import json
+import math
 import os
 import re
 from pathlib import Path
@@ -10,7 +12,9 @@ import numpy as np
 import pytest
 
 from cosymp.cli import main
+from cosymp.methods import METHODS
 from cosymp.report import Figure, Report, Section, Series, envelope, render
+from cosymp.report.style import METHOD_COLORS, MIN_DISTANCE
 from cosymp.scenes import SCENES
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -152,3 +156,25 @@ def test_the_volume_estimator_is_named_for_the_scenes_2n_plus_1_increments():
     names = {name: volume_name(s) for name, s in SCENES.items()}
     assert names["charged"] == "det[X¹ … X⁵]"
     assert all(v == "det[X¹ X² X³]" for k, v in names.items() if SCENES[k].ndof == 1)
+
+
+def cie_lab(color):
+    """CIE L*a*b* (D65) of an sRGB '#rrggbb'."""
+    rgb = [int(color[i:i + 2], 16) / 255 for i in (1, 3, 5)]
+    r, g, b = (c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4 for c in rgb)
+    xyz = ((0.4124 * r + 0.3576 * g + 0.1805 * b) / 0.95047, 0.2126 * r + 0.7152 * g + 0.0722 * b,
+           (0.0193 * r + 0.1192 * g + 0.9505 * b) / 1.08883)
+    fx, fy, fz = (t ** (1 / 3) if t > 0.008856 else 7.787 * t + 16 / 116 for t in xyz)
+    return 116 * fy - 16, 500 * (fx - fy), 200 * (fy - fz)
+
+
+def test_every_method_has_a_colour_far_from_every_other_methods():
+    """A work-precision plot shows every method at once: symplectic Euler, Boris and Gauss 4 were
+    three teals and greens, the compositions two violets (CIE76 distances 14-22)."""
+    assert set(METHODS) <= set(METHOD_COLORS)
+    assert cie_lab("#ffffff") == pytest.approx((100, 0, 0), abs=0.05)
+    assert math.dist(cie_lab("#ff0000"), cie_lab("#000000")) == pytest.approx(117.3, abs=0.2)  # known value
+    distances = {(a, b): math.dist(cie_lab(METHOD_COLORS[a]), cie_lab(METHOD_COLORS[b]))
+                 for a, b in itertools.combinations(METHOD_COLORS, 2)}
+    close = {pair: round(d) for pair, d in distances.items() if d < MIN_DISTANCE}
+    assert not close, close

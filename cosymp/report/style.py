@@ -1,15 +1,18 @@
 """One colour per method, used by the app and by both reports.
 
-Structure-preserving methods are drawn in cool colours (blues, greens, violets), the methods that
-preserve nothing in warm ones (red, orange, brown, pink), the exact flow and scipy's solvers in
-greys. A method keeps its colour in every view, table and report.
+Every method has a hue of its own, far from every other method's (a work-precision plot shows
+them all at once; tests/test_report.py checks the perceptual distance), the exact flow and
+scipy's solvers greys and black. The two methods of the first view keep the classic pair:
+implicit midpoint blue, RK4 red. A method keeps its colour in every view, table and report.
 """
 METHOD_COLORS = {
-    "midpoint": "#1864ab", "symplectic-euler": "#0c8599", "theta": "#5f3dc4", "gauss4": "#2b8a3e",
-    "gauss6": "#0b4f1c", "composition4": "#7048e8", "composition6": "#3b1e8c", "boris": "#087f5b",
-    "euler": "#8c564b", "rk4": "#e03131", "rk8": "#f08c00", "theta-naive": "#e64980",
-    "exact": "#495057", "scipy-RK45": "#868e96", "scipy-DOP853": "#212529", "scipy-LSODA": "#adb5bd",
+    "midpoint": "#1864ab", "symplectic-euler": "#15aabf", "theta": "#862e9c", "gauss4": "#2b8a3e",
+    "gauss6": "#94d82d", "composition4": "#9775fa", "composition6": "#d6336c", "boris": "#5c940d",
+    "euler": "#8c564b", "rk4": "#e03131", "rk8": "#f08c00", "theta-naive": "#ffa8a8",
+    "exact": "#40464d", "scipy-RK45": "#868e96", "scipy-DOP853": "#000000", "scipy-LSODA": "#ced4da",
 }
+MIN_DISTANCE = 25
+"""The least CIE76 distance between two methods' colours (about 2.3 is just noticeable)."""
 OTHER = "#343a40"
 """The colour of a second curve whose method has the same colour as the first (drawn dashed)."""
 GAUGE_COLORS = {"original": "#212529", "coulomb": "#1864ab", "symmetric": "#2b8a3e", "landau": "#e8590c",
