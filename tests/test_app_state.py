@@ -373,6 +373,13 @@ def test_gauge_study_gives_every_gauge_and_invariant_transported_observables():
     assert len(gauges.gauge_series(g.results, "per-gauge", "diff")) == 4
     diff = gauges.gauge_series(g.results, "transported", "diff")["coulomb"][1]
     assert len(diff) <= POINTS and diff.max() < 1e-9, "round-off, drawn as its per-bin bound"
+    for kind in ("per-gauge", "transported"):  # chi(t) only: A, the orbit and Pi unchanged
+        assert np.all(gauges.gauge_series(g.results, kind, "diff")["lorenz"][1] == plotting.FLOOR)
+    text = drawn(gauges.GaugeView(s, g)).floor.object
+    assert "lorenz: χ depends on t only" in text and "exactly 0, drawn at the bottom" in text
+    transported = float(re.search(r"(\S+) transported \(round-off", text).group(1))
+    assert transported == float(f"{max(y.max() for _, y in gauges.gauge_series(g.results, 'transported', 'diff').values()):.1e}")
+    assert transported < 1e-13
 
 
 def test_long_run_in_chunks_matches_the_one_shot_run_and_can_be_cancelled():

@@ -20,8 +20,8 @@ from ..plotting import equation, figure, grid, note, pane, path, peaks, series, 
 from ..study import comparison_bytes, theta_for
 from .base import Feature, FeatureView, Follower
 
-KINDS = (("per-gauge", "Per-gauge runs: the method applied in each gauge"),
-         ("transported", "Transported: the original-gauge run mapped by G_χ"))
+KINDS = (("per-gauge", "Per-gauge runs", "the method applied in each gauge"),
+         ("transported", "Transported runs", "the original gauge's run mapped by G_χ"))
 QUANTITIES = {"orbit": ("orbit (x, y)", "x", "y"), "p": ("canonical p_x (gauge-dependent)", "t", "p_x"),
               "Pi": ("mechanical Π_x = p_x − e A_x (gauge-invariant)", "t", "Π_x"),
               "diff": ("|q − q_orig| + |Π − Π_orig|, max per bin", "t", "difference")}
@@ -95,6 +95,19 @@ def gauge_series(data, kind, quantity):
     return out
 
 
+def floor_text(largest):
+    """What the difference plots show: their largest values, and the gauges whose difference is
+    exactly 0 (drawn at the log axis' floor)."""
+    same = [name for name, x in GAUGES.items() if name != "original" and not np.any(x.C)]
+    text = (f"Largest difference from the original gauge: {largest.get('per-gauge', 0.0):.1e} per gauge (the "
+            f"method's error differs between gauges), {largest.get('transported', 0.0):.1e} transported (round-off:"
+            " G_χ maps the run exactly).")
+    if same:
+        text += (f" {', '.join(same)}: χ depends on t only, so A, the orbit and Π are the original gauge's; "
+                 "the difference is exactly 0, drawn at the bottom of the axis.")
+    return text
+
+
 class GaugeView(FeatureView):
     NAME = "gauges"
 
@@ -102,7 +115,7 @@ class GaugeView(FeatureView):
         g = self.state
         self.sources = {}
         columns = []
-        for kind, text in KINDS:
+        for kind, heading, text in KINDS:
             figs = []
             for quantity, (title, xl, yl) in QUANTITIES.items():
                 fig = figure(title, xl, yl, logy=quantity == "diff")
@@ -113,7 +126,9 @@ class GaugeView(FeatureView):
                     fig.line("x", "y", source=src, line_color=GAUGE_COLORS[name], line_width=1.5,
                              line_dash="solid" if name == "original" or quantity == "diff" else "dashed")
                 figs.append(pane(fig))
-            columns.append(pn.Column(note(f"<h4>{text}</h4>"), *figs, sizing_mode="stretch_width"))
+            # One line of heading and one of text each: the two columns' plots start level.
+            columns.append(pn.Column(note(f"<h4>{heading}</h4><p class='doc'>{html.escape(text)}</p>"), *figs,
+                                     sizing_mode="stretch_width"))
         rows = [pn.Row(note(f"<b>{name}</b>", width=90, sizing_mode=None),
                        equation(f"$\\chi = {x.chi}$", width=230),
                        note(f"<span class='doc'>condition: {html.escape(x.condition)}</span>"
@@ -129,8 +144,9 @@ class GaugeView(FeatureView):
             scene=next(s.name for s in SCENES.values() if has_gauges(s))))
         self.away = pn.Column(note("<p>The gauge study is about the charged particle in a time-dependent field.</p>"),
                               button)
+        self.floor = note("")
         self.body = pn.Column(self.method, *rows, note(f"<div class='colorkey'>{key}</div>"),
-                              grid(*columns), sizing_mode="stretch_width")
+                              grid(*columns), self.floor, sizing_mode="stretch_width")
         return pn.Column(self.away, self.body, sizing_mode="stretch_width")
 
     def update(self):
@@ -142,10 +158,14 @@ class GaugeView(FeatureView):
         self.method.object = (f"<p>Method: <b>{html.escape(g.method)}</b>. q and the mechanical momentum Π agree "
                               "across gauges (to the method's order for per-gauge runs, to round-off when "
                               "transported); the canonical momentum p does not.</p>")
-        for kind, _ in KINDS:
+        largest = {}
+        for kind, *_ in KINDS:
             for quantity in QUANTITIES:
                 for name, (x, y) in gauge_series(g.results, kind, quantity).items():
                     self.sources[kind, quantity, name].data = {"x": x, "y": y}
+                    if quantity == "diff":
+                        largest[kind] = max(largest.get(kind, 0.0), float(np.max(y, initial=0.0)))
+        self.floor.object = f"<p class='doc'>{html.escape(floor_text(largest))}</p>"
 
 
 FEATURE = Feature("gauges", "Gauges", GaugeView, GaugeStudy)
