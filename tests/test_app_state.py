@@ -219,7 +219,7 @@ def test_a_repeated_error_is_posted_again():
 
 
 def test_a_failing_run_shows_its_data_up_to_the_failure_time():
-    s = Study(scene="kapitza")
+    s = Study(scene="kapitza", values={"q0": 1.0})
     s.h = 0.3
     entry = s.results.entries[0]
     assert "Newton" in entry.failure and "reduce h" in entry.failure

@@ -71,8 +71,8 @@ def test_peers_in_the_same_table():
 
 
 def test_a_failed_run_is_a_nan_row_not_dropped():
-    """Implicit midpoint on the driven pendulum at h = 0.5: Newton fails in step 4."""
-    rows = wp.measure("kapitza", ["midpoint"], T=2.0, hs=[0.5, 0.01], budget=0.0)
+    """Implicit midpoint on the driven pendulum from q0 = 1 at h = 0.5: Newton fails in step 4."""
+    rows = wp.measure("kapitza", ["midpoint"], {"q0": 1.0}, T=2.0, hs=[0.5, 0.01], budget=0.0)
     failed, ok = by_solver(rows, "midpoint")
     assert math.isnan(failed["error"]) and math.isnan(failed["wall_s"]) and "Newton" in failed["status"]
     assert ok["status"] == "ok" and ok["error"] < 0.1
@@ -119,7 +119,7 @@ def test_drift_symplectic_bounded_rk4_growing():
     """The pendulum (kapitza without drive): |H + p_t| of RK4 grows linearly with T, that of
     the symplectic methods stays bounded; the errors of the symplectic methods grow linearly."""
     horizons = [20.0, 50.0, 100.0, 200.0, 500.0, 1000.0]
-    rows = wp.drift("kapitza", ["rk4", "midpoint", "gauss4"], {"a": 0.0}, h=0.05, horizons=horizons)
+    rows = wp.drift("kapitza", ["rk4", "midpoint", "gauss4"], {"a": 0.0, "q0": 1.0}, h=0.05, horizons=horizons)
     assert len(rows) == 3 * len(horizons) and all(r["status"] == "ok" for r in rows)
     assert wp.growth_exponent(rows, "rk4", "H_ext_max_abs") == pytest.approx(1.0, abs=0.1)
     for solver in ("midpoint", "gauss4"):
@@ -273,6 +273,6 @@ def test_drift_rows_round_trip_as_csv(tmp_path):
 def test_rk4_error_grows_quadratically_on_the_pendulum():
     """The plain pendulum (kapitza without drive): RK4's energy drift changes its frequency, so
     its phase error grows like T^2; the symplectic gauss4 keeps the energy and errs like T."""
-    rows = wp.drift("kapitza", ["rk4", "gauss4"], {"a": 0.0}, h=0.05, horizons=[500.0, 1e3, 2e3, 5e3, 1e4, 2e4])
+    rows = wp.drift("kapitza", ["rk4", "gauss4"], {"a": 0.0, "q0": 1.0}, h=0.05, horizons=[500.0, 1e3, 2e3, 5e3, 1e4, 2e4])
     assert wp.growth_exponent(rows, "rk4") > 1.7
     assert wp.growth_exponent(rows, "gauss4") == pytest.approx(1.0, abs=0.15)
