@@ -353,6 +353,18 @@ def test_theta_lesson_shows_lifted_symplectic_for_every_theta_and_naive_only_at_
     assert drawn(structure.StructureView(s)).plots["area"].active.fig.yaxis[0].__class__.__name__ == "LinearAxis"
 
 
+def test_the_cloud_says_when_its_loops_are_needles_or_too_small_to_see():
+    """Damped: the loop (radius 0.05) ends 155x wider and 155x flatter on a +-150 axis, drawn as a
+    dash; the note gives both factors, measured from the carried loop."""
+    s = Study(scene="damped")
+    c = s.results.entries[0].comparison
+    width, height = np.ptp(c.cloud.q[:, :, 0], axis=1), np.ptp(c.cloud.p[:, :, 0], axis=1)
+    text = cloud.shape_note(s.results)
+    assert f"{width[-1] / width[0]:.3g}× as wide (q1) and {height[-1] / height[0]:.3g}× as tall" in text
+    assert "a needle" in text and width[-1] / width[0] > 100 and "∮ p·dq" in text
+    assert cloud.shape_note(Study(scene="decaying").results) == "", "nothing to explain: no note"
+
+
 def test_theta_lesson_waits_until_it_is_shown():
     s = Study(scene="damped")
     lesson = theta.ThetaLesson(s)

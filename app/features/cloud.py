@@ -46,6 +46,42 @@ class Snapshots:
                            "y": np.concatenate([np.concatenate([y, gap]) for _, y in later])}
 
 
+SMALL = 0.05  # loops this small against the trajectory's extent show as dots or dashes
+STRETCHED = 10.0  # a loop stretched or squeezed this much in a coordinate is a needle
+
+
+def shape_note(runs):
+    """What the loops' shapes at T are, from A's (or else B's) cloud, when the plots alone mislead:
+    loops tiny against the trajectory, or stretched into needles."""
+    c = next((c for c in comparisons(runs).values() if c.cloud is not None), None)
+    if c is None:
+        return ""
+    q, p = c.cloud.q[:, :, 0], c.cloud.p[:, :, 0]
+    width = np.ptp(q, axis=1)
+    height = np.ptp(p, axis=1)
+    if not (np.all(np.isfinite(width[[0, -1]])) and np.all(np.isfinite(height[[0, -1]])) and width[0] > 0
+            and height[0] > 0):
+        return ""
+    wide, tall = width[-1] / width[0], height[-1] / height[0]
+    span = max(np.ptp(finite_part(c.run.q[:, 0, 0])), np.ptp(finite_part(c.run.p[:, 0, 0])), 1e-300)
+    parts = []
+    if max(wide, 1 / wide, tall, 1 / tall) > STRETCHED:
+        shape = " (stretched one way, squeezed the other: a needle)" if (wide - 1) * (tall - 1) < 0 else ""
+        parts.append(f"At T the loop is {wide:.3g}× as wide (q1) and {tall:.3g}× as tall (p1) as at t = 0{shape}.")
+    if max(width[-1], height[-1]) < SMALL * span:
+        parts.append("The loops are small against the trajectory at this scale (zoom in with the mouse wheel "
+                     "to see one).")
+    if not parts:
+        return ""
+    return ("<p class='doc'>" + " ".join(parts) + " What a symplectic method keeps is the loop's action ∮ p·dq "
+            "(its area in one degree of freedom), below.</p>")
+
+
+def finite_part(x):
+    x = x[np.isfinite(x)]
+    return x if x.size else np.zeros(1)
+
+
 def loops(runs, snapshots):
     cs = comparisons(runs)
     for (slot, snap), color in zip(snapshots.items(), pair_colors(*names(runs))):
@@ -59,9 +95,10 @@ class CloudView(FeatureView):
         self.snapshots = {slot: Snapshots(f"{slot}: loop at t = 0 (light), T/4, T/2, 3T/4, T (dark)") for slot in SLOTS}
         self.plots = time_plots(["area"])
         self.key = note("")
+        self.shape = note("")
         self.follow(self.study, "results")
         return pn.Column(self.key, note(CLOUD_TEXT), grid(*[pane(s.fig) for s in self.snapshots.values()]),
-                         grid(self.plots["area"].panel), sizing_mode="stretch_width")
+                         self.shape, grid(self.plots["area"].panel), sizing_mode="stretch_width")
 
     def update(self):
         runs = self.study.results
@@ -70,6 +107,7 @@ class CloudView(FeatureView):
         loops(runs, self.snapshots)
         update_plots(self.plots, runs)
         self.key.object = color_key(runs)
+        self.shape.object = shape_note(runs)
 
 
 FEATURE = Feature("cloud", "Cloud", CloudView)
