@@ -14,12 +14,15 @@ import math
 from concurrent.futures import ThreadPoolExecutor
 from functools import cache
 
+import numpy as np
 import panel as pn
 import param
 
+from cosymp.diagnostics import distance, norm
 from cosymp.errors import InputError
 from cosymp.integrate import Setup, check_step, default_stride
 from cosymp.methods import METHODS
+from cosymp.reference import fine_steps, reference_final
 from cosymp.report import render
 from cosymp.report.scene import command as report_command
 from cosymp.report.scene import scene_report
@@ -32,6 +35,7 @@ from .presets import HARD, PAPER, PRESETS, URL_NAMES, rounded
 from .warmup import FIRST_VIEW
 
 LIVE_MAX_STEPS = 2_000_000
+LIVE_REFERENCE_STEPS = 200_000  # a fine rk8 reference for the final error takes at most this many steps (~0.1 s)
 CLOUD_POINTS = {True: 32, False: 64}
 DELTA = 1e-4
 # A comparison peaks at <= 39 bytes per value its runs record (damped 39, charged 31, kapitza 28;
@@ -61,6 +65,7 @@ class Entry:
     method: str
     comparison: object
     failure: str
+    final_error: float = None  # relative, against the exact flow or the fine rk8 reference; None if neither
 
 
 @dataclasses.dataclass(frozen=True)
@@ -94,16 +99,37 @@ def compare_until_failure(setup, h, T):
     return study_until_failure(setup, h, T, delta=DELTA, cloud_points=CLOUD_POINTS[setup.scene.kernel.linear])
 
 
+def live_reference(setup, h, T):
+    """The state at T a scene without an exact flow measures the final error against, as the
+    report does (rk8 at a fine step), when that takes at most LIVE_REFERENCE_STEPS steps; else None."""
+    if setup.scene.has_flow or fine_steps(setup, h, T) > LIVE_REFERENCE_STEPS:
+        return None
+    return reference_final(setup, h, T, uncertainty=False)[0][0]
+
+
+def final_error(comparison, failure, z_ref):
+    """The relative error at T: the exact flow's (in the comparison), or against z_ref."""
+    if comparison is None or failure:
+        return None
+    if comparison.error is not None:
+        return float(comparison.error[-1])
+    if z_ref is None:
+        return None
+    return float(distance(comparison.run.z[-1, 0], z_ref) / max(float(norm(z_ref)), np.finfo(float).tiny))
+
+
 def run_pair(scene, setups, h, T):
-    """Compare the setups (both at once, in threads) and return Runs."""
-    with ThreadPoolExecutor(len(setups)) as pool:
+    """Compare the setups and compute the reference (all at once, in threads) and return Runs."""
+    with ThreadPoolExecutor(len(setups) + 1) as pool:
+        reference = pool.submit(live_reference, setups[0], h, T)
         done = list(pool.map(lambda s: compare_until_failure(s, h, T), setups))
+        z_ref = reference.result()
     entries = []
     for s, (comparison, failure) in zip(setups, done):
         label = s.method.label(s.theta)
         if any(e.label == label for e in entries):
             label += " (2)"
-        entries.append(Entry(label, s.method.name, comparison, failure))
+        entries.append(Entry(label, s.method.name, comparison, failure, final_error(comparison, failure, z_ref)))
     return Runs(scene, h, T, tuple(entries))
 
 

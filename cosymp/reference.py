@@ -21,12 +21,20 @@ def check_reference(setup, T):
                          f"{MAX_STEPS:.0e}: shorten T")
 
 
-def reference_final(setup, h, T, z0=None):
+def fine_steps(setup, h, T):
+    """How many rk8 steps the reference of a run of setup with step h to T takes (0 with an exact
+    flow): a whole number k of them per step h, each no larger than 2% of the scene's time scale."""
+    if setup.scene.has_flow:
+        return 0
+    return check_step(h, T) * max(1, math.ceil(h / (REFERENCE_FRACTION * setup.scene.time_scale)))
+
+
+def reference_final(setup, h, T, z0=None, uncertainty=True):
     """(z at the run's final time steps*h, uncertainty) for a run of setup with step h to T.
 
     Exact flow: one exact step over the whole horizon (uncertainty 0). Otherwise rk8 with a
     step h/k no larger than 2% of the scene's time scale, compared with rk8 at twice that step
-    for the uncertainty.
+    for the uncertainty (NaN when not asked for).
     """
     steps = check_step(h, T)
     t_final = steps * h
@@ -34,10 +42,10 @@ def reference_final(setup, h, T, z0=None):
         ref = simulate(Setup.make(setup.scene, "exact", setup.values), t_final, t_final, z0=z0)
         return ref.z[-1], np.zeros(ref.z.shape[1])
     check_reference(setup, t_final)
-    k = max(1, math.ceil(h / (REFERENCE_FRACTION * setup.scene.time_scale)))
+    k = fine_steps(setup, h, T) // steps
     fine = Setup.make(setup.scene, "rk8", setup.values)
     a = simulate(fine, h / k, t_final, z0=z0, stride=steps * k)
-    if steps * k % 2 == 0:
+    if uncertainty and steps * k % 2 == 0:
         b = simulate(fine, 2 * h / k, t_final, z0=z0, stride=steps * k // 2)
         spread = norm(a.z[-1] - b.z[-1])
     else:

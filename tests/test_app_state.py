@@ -16,6 +16,7 @@ from app.features import cloud, common, gauges, longrun, orbits, structure, thet
 from app.plotting import DENSE, POINTS, Raster
 from app.presets import PRESETS, URL_NAMES, parse_items, query_items
 from app.study import Study
+from cosymp.reference import reference_final
 from cosymp.scenes import SCENES
 
 APP = pathlib.Path(__file__).resolve().parent.parent / "app"
@@ -63,6 +64,28 @@ def test_the_first_view_shows_rk4_drifting_out_of_the_symplectic_band():
     text = common.verdict(s.results)
     assert "rk4's |H + p_t| leaves midpoint's bounded band" in text and "rk4 drifts, midpoint does not" in text
     assert s.state() == {**PRESETS[0].state, "theta": 0.5}
+
+
+def test_the_final_error_without_an_exact_flow_is_the_reports_and_the_verdict_says_what_it_means():
+    """Kapitza has no closed-form flow: the table's final relative error is measured against rk8 at
+    a fine step (the report's reference), and midpoint's, the larger, is explained in the verdict."""
+    s = Study(scene="kapitza")
+    setups = s.setups()
+    z_ref = reference_final(setups[0], s.h, s.T)[0][0]
+    for e in s.results.entries:
+        z = e.comparison.run.z[-1, 0]
+        assert e.final_error == pytest.approx(np.linalg.norm(z - z_ref) / np.linalg.norm(z_ref), rel=1e-12)
+        assert common.numbers(s.results)[e.label][3] == plotting.fmt(e.final_error)
+    midpoint, rk4 = s.results.entries
+    assert midpoint.final_error > 10 * rk4.final_error
+    assert f"Its final error is the larger, though ({midpoint.final_error:.2g} against {rk4.final_error:.2g})" \
+        in common.verdict(s.results)
+    assert "against rk8 at a fine step" in orbits.remark(s.results)
+    s.T = 1e4  # 2e6 steps at h 0.005: its reference would be too long for a live view
+    assert all(e.final_error is None for e in s.results.entries) and "Its final error" not in common.verdict(s.results)
+    assert "more than 2e+05 rk8 steps" in orbits.remark(s.results)
+    damped = Study(scene="damped")
+    assert [e.final_error for e in damped.results.entries] == [e.comparison.error[-1] for e in damped.results.entries]
 
 
 def test_the_verdict_calls_a_band_bounded_only_when_the_data_show_it():
