@@ -57,16 +57,18 @@ def wait_for_plot(page, title_start, lines=2):
 
 
 def test_01_the_first_view_teaches_and_a_is_drawn_over_b(page):
-    """The first view: the verdict in words, RK4's |H + p_t| leaving midpoint's band; in every
-    portrait the first method (A) is drawn last (on top), solid, the second (B) dashed."""
+    """The first view: the verdict in words, RK4's |H + p_t| leaving midpoint's band; the first
+    method (A) is drawn solid over the second (B), dashed; a portrait then draws the last part of
+    each orbit bold, B's dashes over A (where the orbits fill one band, A hid B)."""
     page.open()
     expect(page.page.locator(".verdict")).to_contain_text("rk4's |H + p_t| leaves midpoint's bounded band")
     energy = wait_for_plot(page, "max |H + p_t| per bin")
-    portrait = wait_for_plot(page, "phase portrait")
-    for plot in (energy, portrait):
-        drawn = [line for line in plot["lines"] if line["n"] > 1]
-        assert drawn[-1]["color"] == METHOD_COLORS["midpoint"] and drawn[-1]["dash"] == []
-        assert drawn[0]["color"] == METHOD_COLORS["rk4"] and drawn[0]["dash"] != []
+    portrait = wait_for_plot(page, "phase portrait", lines=4)
+    a = (METHOD_COLORS["midpoint"], True)
+    b = (METHOD_COLORS["rk4"], False)
+    for plot, order in ((energy, [b, a]), (portrait, [b, a, a, b])):
+        drawn = [(line["color"], line["dash"] == []) for line in plot["lines"] if line["n"] > 1]
+        assert drawn == order
     page.shot("t01-first-view")
     page.check()
 
