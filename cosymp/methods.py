@@ -10,7 +10,7 @@ from functools import cache
 import numpy as np
 
 from .errors import InputError, as_number, quoted
-from .kernels.families import Boris, Composition, Exact, Explicit, Gauss, Theta
+from .kernels.families import Boris, Composition, Exact, Explicit, Gauss, Splitting, Theta
 from .kernels.stack import MAX_OFFSETS, MAX_STAGES
 
 
@@ -45,6 +45,42 @@ def _triple_jump(inner, order):
     g1 = 1.0 / (2.0 - 2.0 ** (1.0 / (order + 1)))
     g0 = 1.0 - 2.0 * g1
     return [g * x for g in (g1, g0, g1) for x in inner]
+
+
+def _splitting(a, b):
+    """Splitting data from drift and kick coefficients (kick b[i], then drift a[i]). Each set sums
+    to 1; the round-off of that sum (published coefficients have 15 digits) goes to the middle one."""
+    a, b = np.array(a, float), np.array(b, float)
+    assert len(a) == len(b) and abs(a.sum() - 1.0) < 1e-13 and abs(b.sum() - 1.0) < 1e-13
+    for x in (a, b):
+        x[len(x) // 2] += 1.0 - x.sum()
+    times = np.concatenate(([0.0], np.cumsum(a)[:-1]))
+    times[np.isclose(times, 1.0, rtol=0.0, atol=1e-14)] = 1.0
+    offsets, kick = np.unique(np.where(b != 0.0, times, times[np.flatnonzero(b)[0]]), return_inverse=True)
+    return Splitting(_floats(a), _floats(b), kick.astype(np.int64), _floats(offsets))
+
+
+def _leapfrogs(gammas):
+    """Symmetric drift-kick-drift leapfrog sub-steps of sizes gammas[i] h, their half drifts merged:
+    one kick per sub-step."""
+    g = np.asarray(gammas, float)
+    a = 0.5 * (g + np.append(g[1:], 0.0))
+    return _splitting(np.concatenate(([0.5 * g[0]], a)), np.concatenate(([0.0], g)))
+
+
+# Blanes & Moan, J. Comput. Appl. Math. 142 (2002) 313-330, Table 3: symmetric symplectic
+# Runge-Kutta-Nystrom methods in kick-drift form (b: kicks, a: drifts, the last drift empty).
+# They need [V, [V, [V, T + p_t]]] = 0, which holds when T is quadratic in p (any t dependence).
+SRKN6B = ([0.245298957184271, 0.604872665711080, -0.350171622895351, -0.350171622895351,
+           0.604872665711080, 0.245298957184271, 0.0],
+          [0.0829844064174052, 0.396309801498368, -0.0390563049223486, 0.1195241940131508,
+           -0.0390563049223486, 0.396309801498368, 0.0829844064174052])
+SRKN11B = ([0.123229775946271, 0.290553797799558, -0.127049212625417, -0.246331761062075, 0.357208872795928,
+            0.2047770542914700, 0.357208872795928, -0.246331761062075, -0.127049212625417, 0.290553797799558,
+            0.123229775946271, 0.0],
+           [0.0414649985182624, 0.198128671918067, -0.0400061921041533, 0.0752539843015807, -0.0115113874206879,
+            0.2366699247869311, 0.2366699247869311, -0.0115113874206879, 0.0752539843015807, -0.0400061921041533,
+            0.198128671918067, 0.0414649985182624])
 
 
 def _rk4():
@@ -115,6 +151,9 @@ class Method:
 
     def refusal(self, scene):
         """None if the method applies to the scene, else the reason it does not."""
+        if self.requires == "separable" and not scene.separable:
+            return (f"method '{self.name}' splits H = T(p, t) + V(q, t) and scene '{scene.name}' is not "
+                    f"separable: use it on {', '.join(_with('separable'))}")
         if self.requires == "flow" and not scene.has_flow:
             return (f"method '{self.name}' needs a closed-form flow and scene '{scene.name}' has none: "
                     f"use it on {', '.join(_with('has_flow'))}")
@@ -180,6 +219,21 @@ METHODS = {m.name: m for m in (
     Method("boris", "Boris push", "the standard charged-particle pusher (drift-kick-drift, fields at "
            "the half step); volume-preserving, gauge-independent", 2, "volume",
            lambda: Boris(_floats([0.0, 0.5, 1.0])), requires="fields"),
+    Method("leapfrog", "Störmer-Verlet leapfrog", "explicit splitting of a separable H: half drift (T and "
+           "t), kick (V), half drift; symplectic on the extended phase space, one force per step", 2,
+           "symplectic", lambda: _leapfrogs([1.0]), requires="separable"),
+    Method("yoshida4", "Yoshida 4 (leapfrog triple jump)", "Yoshida's triple jump of the leapfrog: 3 "
+           "forces per step", 4, "symplectic", lambda: _leapfrogs(_TJ4), requires="separable"),
+    Method("yoshida6", "Yoshida 6 (triple jump of Yoshida 4)", "the triple jump applied to Yoshida 4: "
+           "9 forces per step", 6, "symplectic", lambda: _leapfrogs(_triple_jump(_TJ4, 4)),
+           requires="separable"),
+    Method("blanes-moan4", "Blanes-Moan SRKN 4", "Blanes & Moan's optimised order-4 Runge-Kutta-Nystrom "
+           "splitting (2002, SRKN6b): 7 forces per step here (the last and the next step's first are not "
+           "merged)", 4, "symplectic",
+           lambda: _splitting(*SRKN6B), requires="separable"),
+    Method("blanes-moan6", "Blanes-Moan SRKN 6", "Blanes & Moan's optimised order-6 Runge-Kutta-Nystrom "
+           "splitting (2002, SRKN11b): 12 forces per step here", 6, "symplectic",
+           lambda: _splitting(*SRKN11B), requires="separable"),
     Method("exact", "Exact flow", "the scene's closed-form flow", 0, "exact",
            lambda: Exact(_floats([0.0, 1.0])), requires="flow"),
 )}

@@ -32,7 +32,7 @@ import numpy as np
 from .diagnostics import det_deviation, distance, norm, tangent_maps
 from .errors import InputError, RunError
 from .integrate import MAX_STEPS, Setup, check_step, get_scene, simulate
-from .kernels.families import Composition, Exact, Explicit, Gauss
+from .kernels.families import Composition, Exact, Explicit, Gauss, Splitting
 from .kernels.loops import energies
 from .methods import METHODS
 from .methods import method as get_method
@@ -46,7 +46,8 @@ DRIFT_FIELDS = ("scene", "solver", "order", "preserves", "h", "T", "steps", "err
 PEERS = ("RK45", "DOP853", "LSODA")
 PEER_RTOLS = tuple(10.0 ** -k for k in range(3, 14))
 DEFAULT_METHODS = ("euler", "rk4", "rk8", "midpoint", "symplectic-euler", "gauss4", "gauss6",
-                   "composition4", "composition6", "boris")
+                   "composition4", "composition6", "boris", "leapfrog", "yoshida4", "yoshida6", "blanes-moan4",
+                   "blanes-moan6")
 DRIFT_METHODS = ("rk4", "midpoint", "symplectic-euler", "gauss4", "gauss6")
 DRIFT_HORIZONS = tuple(float(m * 10 ** e) for e in range(2, 6) for m in (1, 2, 5)) + (1e6,)
 DRIFT_MAX_STEPS = 10_000_000
@@ -89,6 +90,8 @@ def rhs_per_step(setup):
     D = setup.data
     if isinstance(D, Explicit):
         return float(len(D.b))
+    if isinstance(D, Splitting):  # one force (the gradient of V) per kick
+        return float(np.count_nonzero(D.b))
     if isinstance(D, Exact) or not setup.scene.kernel.linear:
         return math.nan
     if isinstance(D, Composition):

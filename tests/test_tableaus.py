@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from cosymp.kernels.families import Boris, Composition, Exact, Explicit, Gauss, Theta
+from cosymp.kernels.families import Boris, Composition, Exact, Explicit, Gauss, Splitting, Theta
 from cosymp.methods import METHODS
 
 TOL = 1e-14
@@ -72,13 +72,28 @@ def theta_family(m, D, theta):
         assert (D.wq1, D.wp1) == (expected, 1.0 - expected), "lifted: q at theta, p at 1 - theta"
 
 
+def splitting(m, D, theta):
+    assert D.a.sum() == pytest.approx(1.0, abs=TOL) and D.b.sum() == pytest.approx(1.0, abs=TOL), \
+        "drifts and kicks each add up to one step"
+    times = np.concatenate(([0.0], np.cumsum(D.a)[:-1]))
+    kicked = D.b != 0.0
+    assert np.allclose(D.offsets[D.kick[kicked]], times[kicked], rtol=0, atol=TOL), "each kick at its time"
+    ops = [(kind, x) for kick, drift in zip(D.b, D.a) for kind, x in (("kick", kick), ("drift", drift)) if x != 0.0]
+    assert [k for k, _ in ops] == [k for k, _ in ops[::-1]], "symmetric (time-reversible)"
+    assert np.allclose([x for _, x in ops], [x for _, x in ops[::-1]], rtol=0, atol=TOL), "symmetric"
+    if m.name.startswith(("leapfrog", "yoshida")):  # leapfrogs of sizes g: sum g^k = 0, odd k < order
+        g = D.b[kicked]
+        for k in range(3, m.order, 2):
+            assert abs(np.sum(g ** k)) < 1e-13, f"sum gamma^{k} = 0 for order {m.order}"
+
+
 def fixed_offsets(expected):
     def check(m, D, theta):
         assert tuple(D.offsets) == expected
     return check
 
 
-CHECKS = {Explicit: explicit, Gauss: gauss, Composition: composition, Theta: theta_family,
+CHECKS = {Explicit: explicit, Gauss: gauss, Composition: composition, Theta: theta_family, Splitting: splitting,
           Boris: fixed_offsets((0.0, 0.5, 1.0)), Exact: fixed_offsets((0.0, 1.0))}
 
 

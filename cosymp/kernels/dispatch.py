@@ -114,6 +114,10 @@ flow = _dispatched("flow", 4, "Exact flow from t0 to t1, in place: flow(P, t0, t
 vecpot = _dispatched("vecpot", 5, "Vector potential of the run's gauge at q = z[:2]: vecpot(P, C, j, z, A)")
 efield = _dispatched("efield", 5, "Electric field at q = z[:2]: efield(P, C, j, z, E)")
 bfield = _dispatched("bfield", 3, "Magnetic field (z component): bfield(P, C, j)")
+kick = _dispatched("kick", 5, "Exact flow of V(q, t) for a time tau at row j's time (separable scenes): "
+                   "kick(P, C, j, tau, z) -> p_t increment")
+drift = _dispatched("drift", 4, "Exact flow of T(p, t) + p_t from t0 for a time tau (separable scenes): "
+                    "drift(P, t0, tau, z) -> p_t increment")
 scaling = _dispatched("scaling", 2, "Exponent e and time shift tau of the step from t (see "
                       "scenes.base.SceneKernel): scaling(P, t) -> (e, tau)")
 step = _dispatched("step", 8, "One step of family D for one member: step(D, P, C, t, h, z, pt, W) -> (status, pt)")

@@ -8,7 +8,7 @@ scenes.quadratic) and applied to every member of an ensemble. M is also the exac
 from numba import njit
 
 from .dispatch import INLINE, SCRATCH, flow, ndof
-from .families import boris_core
+from .families import boris_core, splitting_step
 from .linalg import solve
 from .stack import matrices, stage_matrices, stage_square, vectors
 
@@ -264,3 +264,33 @@ def boris_lmatrix(D, P, C, t, h, M, Q, W):
             Q[i, c] = 0.0
     add_sandwich(Q, N, C, 1, m, h, MM[1])
     return h * sdot0(C, 1, m)
+
+
+@njit(**SCRATCH)
+def splitting_lwork(D, P):
+    return vectors(P, 1, 0.0)
+
+
+@njit(**INLINE)
+def splitting_lmatrix(D, P, C, t, h, M, Q, W):
+    """M's columns are the steps of the unit vectors; the p_t increment -(z.Q z/2 + s), a
+    quadratic form plus a constant, is read off at 0, at each e_c and at each e_c + e_r."""
+    v = W[0]
+    m = 2 * ndof(P)
+    for r in range(m):
+        v[r] = 0.0
+    d0 = splitting_step(D, P, C, t, h, v, 0.0, W)[1]
+    for c in range(m):
+        for r in range(m):
+            v[r] = 1.0 if r == c else 0.0
+        d = splitting_step(D, P, C, t, h, v, 0.0, W)[1]
+        for r in range(m):
+            M[r, c] = v[r]
+        Q[c, c] = -2.0 * (d - d0)
+    for c in range(m):
+        for r in range(c + 1, m):
+            for i in range(m):
+                v[i] = 1.0 if i == c or i == r else 0.0
+            d = splitting_step(D, P, C, t, h, v, 0.0, W)[1]
+            Q[c, r] = Q[r, c] = -(d - d0) - 0.5 * (Q[c, c] + Q[r, r])
+    return -d0

@@ -14,4 +14,5 @@ FAMILIES = {
                                 lin.composition_lwork),
     f.Boris: FamilyKernel(f.boris_step, f.boris_work, lin.boris_lmatrix, lin.boris_lwork),
     f.Exact: FamilyKernel(f.exact_step, f.exact_work, lin.exact_lmatrix, lin.exact_lwork),
+    f.Splitting: FamilyKernel(f.splitting_step, f.splitting_work, lin.splitting_lmatrix, lin.splitting_lwork),
 }

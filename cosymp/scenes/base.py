@@ -53,6 +53,11 @@ class SceneKernel:
     scaling is symplectic and constant within the step, and powers of two are exact, so every
     method takes the same step up to rounding; only values that would overflow (coefficients e^{gamma t} of the
     damped scene) stay finite while the state does.
+
+    A separable scene, H = T(p, t) + V(q, t), also gives the exact flows the splitting methods
+    compose, each returning its p_t increment: kick(P, C, j, tau, z), the flow of V for a time tau
+    at the time of row j (p moves), and drift(P, t0, tau, z), the flow of T + p_t from t0 to
+    t0 + tau (q and t move).
     """
 
     ndof: int
@@ -68,6 +73,8 @@ class SceneKernel:
     efield: Callable = None
     bfield: Callable = None
     scaling: Callable = unscaled
+    kick: Callable = None
+    drift: Callable = None
 
 
 @dataclass(frozen=True)
@@ -103,6 +110,10 @@ class Scene:
     @property
     def has_fields(self):
         return self.kernel.efield is not None
+
+    @property
+    def separable(self):
+        return self.kernel.kick is not None
 
     def values(self, overrides=None):
         """Defaults updated by overrides, each checked; unknown names are refused."""

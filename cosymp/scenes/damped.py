@@ -63,6 +63,15 @@ def flow(P, t0, t1, z):
     z[1] = (p * C + (0.5 * P.gamma * p - P.m * P.w0 * (q / root) / root) * S) / half
 
 
+@njit(**INLINE)
+def drift(P, t0, tau, z):
+    """The flow of T + p_t with T = e^(gamma t) p^2/(2m): q += p/m times the integral of e^(gamma t)."""
+    clock = np.exp(P.gamma * t0) * tau * quadratic.exprel(P.gamma * tau)
+    p = z[1]
+    z[0] += clock * p / P.m
+    return -0.5 * p * p / P.m * P.gamma * clock
+
+
 SCENE = Scene(
     name="damped",
     title="Damped oscillator (Caldirola-Kanai, as printed)",
@@ -85,7 +94,7 @@ SCENE = Scene(
     ),
     kernel=SceneKernel(ndof=1, ncoef=quadratic.ncoef(1), linear=True, coef=coef,
                        energy=quadratic.energy, grad=quadratic.grad, hess=quadratic.hess,
-                       dhdt=quadratic.dhdt, flow=flow, scaling=scaling),
+                       dhdt=quadratic.dhdt, flow=flow, scaling=scaling, kick=quadratic.kick, drift=drift),
     Params=DampedParams,
     h=0.1,
     T=50.0,

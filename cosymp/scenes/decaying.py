@@ -32,6 +32,16 @@ def flow(P, t0, t1, z):
     z[1] = -s * q + c * z[1]
 
 
+@njit(**INLINE)
+def drift(P, t0, tau, z):
+    """The flow of T + p_t with T = e^(-lam t) p^2/2: q += p times the integral of e^(-lam t)."""
+    x = -P.lam * tau
+    clock = np.exp(-P.lam * t0) * tau * quadratic.exprel(x)
+    p2 = z[1] * z[1]
+    z[0] += clock * z[1]
+    return 0.5 * p2 * P.lam * clock
+
+
 SCENE = Scene(
     name="decaying",
     title="Opening example: oscillator with decaying Hamiltonian",
@@ -50,7 +60,7 @@ SCENE = Scene(
     ),
     kernel=SceneKernel(ndof=1, ncoef=quadratic.ncoef(1), linear=True, coef=coef,
                        energy=quadratic.energy, grad=quadratic.grad, hess=quadratic.hess,
-                       dhdt=quadratic.dhdt, flow=flow),
+                       dhdt=quadratic.dhdt, flow=flow, kick=quadratic.kick, drift=drift),
     Params=DecayingParams,
     h=0.1,
     T=10.0,

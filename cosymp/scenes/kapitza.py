@@ -40,6 +40,20 @@ def dhdt(P, C, r, z):
     return -C[r, 1] * np.cos(z[0])
 
 
+@njit(**INLINE)
+def kick(P, C, r, tau, z):
+    """The flow of V = -g(t) cos q for a time tau at row r's time: p -= tau g sin q."""
+    z[1] -= tau * C[r, 0] * np.sin(z[0])
+    return tau * C[r, 1] * np.cos(z[0])
+
+
+@njit(**INLINE)
+def drift(P, t0, tau, z):
+    """The flow of T + p_t with T = p^2/2: q += tau p; p_t stays."""
+    z[0] += tau * z[1]
+    return 0.0 * z[0]
+
+
 SCENE = Scene(
     name="kapitza",
     title="Kapitza's pendulum (vertically driven pivot)",
@@ -60,7 +74,7 @@ SCENE = Scene(
         Param("p0", 0.0, "initial angular momentum p(0)", (-1e3, 1e3), initial=True),
     ),
     kernel=SceneKernel(ndof=1, ncoef=2, linear=False, coef=coef, energy=energy, grad=grad,
-                       hess=hess, dhdt=dhdt),
+                       hess=hess, dhdt=dhdt, kick=kick, drift=drift),
     Params=KapitzaParams,
     h=0.005,
     T=20.0,

@@ -20,6 +20,13 @@ def coef(P, t, C, r):
     quadratic.finish(P, C, r)
 
 
+@njit(**INLINE)
+def drift(P, t0, tau, z):
+    """The flow of T + p_t with T = p^2/2: q += tau p; p_t stays."""
+    z[0] += tau * z[1]
+    return 0.0 * z[0]
+
+
 SCENE = Scene(
     name="modulated",
     title="Oscillator with time-dependent potential",
@@ -39,7 +46,7 @@ SCENE = Scene(
     ),
     kernel=SceneKernel(ndof=1, ncoef=quadratic.ncoef(1), linear=True, coef=coef,
                        energy=quadratic.energy, grad=quadratic.grad, hess=quadratic.hess,
-                       dhdt=quadratic.dhdt),
+                       dhdt=quadratic.dhdt, kick=quadratic.kick, drift=drift),
     Params=ModulatedParams,
     h=0.1,
     T=50.0,

@@ -2,8 +2,10 @@
 
 Such a scene only writes its coefficient function, filling row r of C with S (row-major, 2n x 2n),
 dS/dt, s and ds/dt and ending with `finish`, which appends J S (the matrix of the linear vector
-field, read by the step builders); energy, gradient, Hessian and dH/dt below serve them all.
+field, read by the step builders); energy, gradient, Hessian and dH/dt below serve them all, and
+`kick` the splitting methods of a separable one (S_qp = 0).
 """
+import numpy as np
 from numba import njit
 
 from ..kernels.dispatch import INLINE, ndof
@@ -60,6 +62,30 @@ def finish(P, C, r):
         for c in range(m):
             C[r, off + i * m + c] = C[r, (n + i) * m + c]
             C[r, off + (n + i) * m + c] = -C[r, i * m + c]
+
+
+@njit(**INLINE)
+def kick(P, C, r, tau, z):
+    """The exact flow of V(q, t) = q.S_qq q/2 + s for a time tau at the time of row r, for a
+    separable H (S_qp = 0; q and t stay): p -= tau S_qq q. Returns the p_t increment -tau dV/dt."""
+    n = ndof(P)
+    m = 2 * n
+    dv = 0.0 * z[0]
+    for i in range(n):
+        force = C[r, i * m] * z[0]
+        rate = C[r, m * m + i * m] * z[0]
+        for c in range(1, n):
+            force += C[r, i * m + c] * z[c]
+            rate += C[r, m * m + i * m + c] * z[c]
+        z[n + i] -= tau * force
+        dv += z[i] * rate
+    return -tau * (0.5 * dv + C[r, 2 * m * m + 1])
+
+
+@njit(**INLINE)
+def exprel(x):
+    """(e^x - 1) / x, 1 at x = 0: the integral of e^(x s) over s in [0, 1]."""
+    return 1.0 if x == 0.0 else np.expm1(x) / x
 
 
 def ncoef(ndof):
