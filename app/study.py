@@ -272,11 +272,14 @@ class Study(Job):
             updates = {k: getattr(scene, k) for k in ("h", "T") if k not in changed}
             if "values" not in changed:
                 updates["values"] = {}
+            switched = []
             for name, fallback in (("method", "midpoint"), ("other", "rk4")):
                 reason = METHODS[getattr(self, name)].refusal(scene)
                 if reason:
                     updates[name] = fallback
-                    self.say(Note("info", f"{reason}; switched to {fallback}"))
+                    switched.append(f"{reason}; switched to {fallback}")
+            if switched:  # one message: a second one at once replaced the first on the page
+                self.say(Note("info", " | ".join(switched)))
             try:
                 scene.values(updates.get("values", self.values))
             except InputError as err:

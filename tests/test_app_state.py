@@ -81,6 +81,7 @@ def test_the_final_error_without_an_exact_flow_is_the_reports_and_the_verdict_sa
     assert f"Its final error is the larger, though ({midpoint.final_error:.2g} against {rk4.final_error:.2g})" \
         in common.verdict(s.results)
     assert "against rk8 at a fine step" in orbits.remark(s.results)
+    assert "Nothing bounds it over longer runs" in common.verdict(s.results), "no claim the data do not show"
     s.T = 1e4  # 2e6 steps at h 0.005: its reference would be too long for a live view
     assert all(e.final_error is None for e in s.results.entries) and "Its final error" not in common.verdict(s.results)
     assert "more than 2e+05 rk8 steps" in orbits.remark(s.results)
@@ -151,7 +152,7 @@ def test_scenes_of_one_shape_share_the_portraits_relabelled_with_fresh_ranges():
     assert shown_figures(view) is figs and list(view.grid.objects) == figs.panes
     assert fig.yaxis.axis_label == "p" and "phase portrait" in fig.title.text
     s.scene = "charged"
-    assert shown_figures(view) is not figs and fig.title.text == f"phase portrait (q, p); {common.PORTRAIT_MARKS}"
+    assert shown_figures(view) is not figs and fig.title.text == f"phase portrait: {common.PORTRAIT_MARKS}"
     s.scene = "kapitza"
     assert shown_figures(view) is figs and plotted(figs.portraits[0][2]).size > 0
     assert list(view.grid.objects) == figs.panes[:-1]
@@ -199,6 +200,12 @@ def test_a_scene_without_the_method_falls_back_and_says_so():
     s.scene = "damped"
     assert s.method == "midpoint" and s.message.level == "info" and "boris" in s.message.text
     assert s.results.scene == "damped"
+    s = Study(scene="modulated", method="blanes-moan6", other="leapfrog")
+    said = []
+    s.param.watch(lambda e: said.append(s.message.text), "message")
+    s.scene = "charged"
+    assert (s.method, s.other) == ("midpoint", "rk4") and len(said) == 1, "both switches in one message"
+    assert "'blanes-moan6'" in said[0] and "'leapfrog'" in said[0] and "not separable" in said[0]
 
 
 @pytest.mark.parametrize("change, needle", [

@@ -70,8 +70,9 @@ def verdict(runs):
     above = np.flatnonzero(drift > band)
     if not above.size:
         return (f"<p class='verdict'>Up to T = {runs.T:g}, {html.escape(n)}'s |H + p_t| (at most {drift.max():.2g}) "
-                f"stays below {what}; a method that preserves nothing lets it grow with T: the Long run tab goes "
-                f"further.{phase_note(ke, le)}</p>")
+                f"stays below {what}: at this h and T the error of {html.escape(n)}'s higher order is the smaller. "
+                "Nothing bounds it over longer runs; whether it leaves the band there depends on the scene (the "
+                f"Long run tab measures it).{phase_note(ke, le)}</p>")
     return (f"<p class='verdict'>{html.escape(n)}'s |H + p_t| leaves {what} at t ≈ {lr.t[above[0]]:.3g} and ends "
             f"{drift[-1] / band:.3g}× above it at t = {lr.t[-1]:g}: "
             + (f"{html.escape(n)} drifts, {html.escape(p)} does not." if bounded else
@@ -106,7 +107,7 @@ def numbers(runs):
 
 
 TAIL = 0.02  # the last part of a run drawn bold over its whole orbit in the portraits
-PORTRAIT_MARKS = f"dot: start, bold: last {TAIL:.0%}"
+PORTRAIT_MARKS = f"dot start, bold last {TAIL:.0%}"
 
 
 def tail(x, y):
@@ -122,8 +123,8 @@ def phase_axes(scene):
     n = s.ndof
     names_ = list(s.coordinates)
     if n == 1:
-        return [(0, 1, "q", "p", f"phase portrait (q, p); {PORTRAIT_MARKS}")]
-    return [(0, 1, names_[0], names_[1], f"orbit ({names_[0]}, {names_[1]}); {PORTRAIT_MARKS}")] + [
+        return [(0, 1, "q", "p", f"phase portrait: {PORTRAIT_MARKS}")]
+    return [(0, 1, names_[0], names_[1], f"orbit ({names_[0]}, {names_[1]}): {PORTRAIT_MARKS}")] + [
         (i, n + i, names_[i], f"p_{names_[i]}", f"({names_[i]}, p_{names_[i]})") for i in range(n)]
 
 
