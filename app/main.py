@@ -52,6 +52,12 @@ class App(param.Parameterized):
         self._stopped = False
         # The raw query text (Panel's query_params turns numbers and JSON into values already).
         query = dict(parse_qsl(pn.state.location.search.lstrip("?"))) if pn.state.location is not None else {}
+        known = set(URL_NAMES.values()) | {u for f in FEATURES for u in f.url.values()}
+        unknown = sorted(set(query) - known)
+        if unknown:  # a hand-edited link with a misspelt name showed another comparison, silently
+            self._pending.append(Note("error", f"the link's {', '.join(unknown)} "
+                                               f"{'is' if len(unknown) == 1 else 'are'} not a setting of this app "
+                                               f"(settings: {', '.join(sorted(known))}): ignored"))
         self.study = self._study(query)
         self.states = {f.name: f.state(self.study) if f.state else None for f in FEATURES}
         for f in (f for f in FEATURES if f.url):
@@ -124,8 +130,10 @@ class App(param.Parameterized):
             self._notify(event.new.level, event.new.text)
 
     def _notify(self, level, text):
+        """A toast. Its text is escaped: the toasts (notyf) set it as HTML, and messages quote what a
+        link or a box held."""
         if pn.state.notifications is not None and not self._stopped:
-            getattr(pn.state.notifications, level)(text, duration=NOTIFY_MS[level])
+            getattr(pn.state.notifications, level)(html.escape(text), duration=NOTIFY_MS[level])
 
     def _write_url(self):
         """The URL holds the state of the shown results (only ever a valid one), so a copied link

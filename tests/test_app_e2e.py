@@ -137,6 +137,22 @@ def test_a_preset_link_opens_its_figure(page):
     page.check()
 
 
+def test_a_link_s_unknown_names_and_markup_are_said_as_text_never_run(page):
+    """A misspelt name ('other' for 'vs') was ignored without a word; and the toasts set their
+    text as HTML, so markup in a link's value ran in the page."""
+    page.page.goto(page.base + "?scene=modulated&other=leapfrog&view=<img src=x onerror=window.pwned=1>",
+                   wait_until="load")
+    page.page.wait_for_selector("h2")
+    unknown = page.page.locator(".notyf__toast", has_text="not a setting of this app").first
+    unknown.wait_for()
+    assert "the link's other is not a setting" in unknown.inner_text()
+    bad_view = page.page.locator(".notyf__toast", has_text="could not be applied").first
+    bad_view.wait_for()
+    assert "<img src=x onerror=window.pwned=1>" in bad_view.inner_text()
+    assert page.page.evaluate("window.pwned") is None
+    assert page.page.locator(".notyf__toast img").count() == 0
+
+
 def test_a_bad_beta_is_a_notification_and_the_last_good_state_stays(page):
     page.open(query(scene="charged"))
     page.page.wait_for_selector(TABLE_ROW)
