@@ -22,7 +22,9 @@ through Playwright's async API (one event loop, the pages work at once):
 5. Refusals, on page 1, while the long run holds its 256 MB lease: a 1.5e6-step comparison
    (549 MB > the cap: "needs about ... COSYMP_MEMORY_CAP_MB") and a 3e5-step one (330 MB, under
    the cap but over the 247 MB the long run leaves: "free while other runs hold the rest"); the
-   last good results must stay, RSS must not jump, and a good h then updates the plots.
+   last good results must stay, RSS must not jump by anything like a refused request (less than
+   half the smaller one, 165 MB: the long run keeps growing beside them, and CI saw 103 MB once),
+   and a good h then updates the plots.
 6. Clean-up: the long run is cancelled (its Cancel button); the 330 MB comparison refused in 5
    must now be computed (the cancelled run gave its lease back); all 11 contexts are closed and
    the server's log (PANEL_LOG_LEVEL=info: "Session <id> launching" / "destroyed") is read until
@@ -112,7 +114,6 @@ CANCEL_BOUND_S = 20            # click to "cancelled at" shown
 LONG_T = 3e6                   # the long run's horizon: 3e7 steps per method (see the docstring)
 LONG_STALL_S = 60              # longest time the long run's progress (1% steps) may stand still
 AFTER_MARGIN_MB = 200
-REFUSAL_JUMP_MB = 100
 REFUSAL_T = 300.0
 OVER_CAP_H = 0.0002            # 1.5e6 steps: 549 MB, over the cap
 OVER_FREE_H = 0.001            # 3e5 steps: 330 MB, under the cap, over what the long run leaves free
@@ -678,7 +679,7 @@ def test_a_request_over_the_cap_is_refused_and_the_page_still_works(load):
     assert f"needs about {ref['over_cap_request_mb']:.0f} MB" in ref["over_cap_text"] and f"cap of {CAP_MB} MB" in ref["over_cap_text"]
     assert ref["free_text"] is not None and f"needs about {ref['free_request_mb']:.0f} MB" in ref["free_text"]
     assert ref["kept_last_good"]
-    assert ref["rss_peak_during_mb"] - ref["rss_before_mb"] < REFUSAL_JUMP_MB, ref
+    assert ref["rss_peak_during_mb"] - ref["rss_before_mb"] < 0.5 * ref["free_request_mb"], ref
     assert ref["good_value_update_s"] < MOVE_TIMEOUT_MS / 1000
 
 
