@@ -9,7 +9,7 @@ METHOD_COLORS = {
     "midpoint": "#1864ab", "symplectic-euler": "#15aabf", "theta": "#862e9c", "gauss4": "#2b8a3e",
     "gauss6": "#94d82d", "composition4": "#9775fa", "composition6": "#d6336c", "boris": "#5c940d",
     "euler": "#8c564b", "rk4": "#e03131", "rk8": "#f08c00", "theta-naive": "#ffa8a8",
-    "leapfrog": "#2222ee", "yoshida4": "#dd22dd", "yoshida6": "#886600", "blanes-moan4": "#ff55cc",
+    "leapfrog": "#00c6a4", "yoshida4": "#dd22dd", "yoshida6": "#886600", "blanes-moan4": "#ff55cc",
     "blanes-moan6": "#bb88cc", "exact": "#40464d", "scipy-RK45": "#868e96", "scipy-DOP853": "#000000", "scipy-LSODA": "#ced4da",
 }
 MIN_DISTANCE = 25
