@@ -14,11 +14,10 @@ import math
 from concurrent.futures import ThreadPoolExecutor
 from functools import cache
 
-import numpy as np
 import panel as pn
 import param
 
-from cosymp.diagnostics import distance, norm
+from cosymp.diagnostics import relative_error
 from cosymp.errors import InputError
 from cosymp.integrate import Setup, check_step, default_stride
 from cosymp.methods import METHODS
@@ -115,7 +114,7 @@ def final_error(comparison, failure, z_ref):
         return float(comparison.error[-1])
     if z_ref is None:
         return None
-    return float(distance(comparison.run.z[-1, 0], z_ref) / max(float(norm(z_ref)), np.finfo(float).tiny))
+    return relative_error(comparison.run.z[-1, 0], z_ref)[0]
 
 
 def run_pair(scene, setups, h, T):

@@ -183,9 +183,8 @@ def _measure(setup, nsteps, lib):
     H0 = np.empty((1, z0.shape[0]))
     energies(setup.P, np.zeros(1), z0[None], H0)
     runners = [_Numba(setup, h, z0, -H0[0], nsteps)]
-    if lib is not None and _family(setup.data) is None:
-        lib = None
-    if lib is not None:
+    mirrored = _family(setup.data) is not None
+    if lib is not None and mirrored:
         runners.append(_C(lib, setup, h, z0, -H0[0], nsteps))
     for r in runners:
         r.timed()
@@ -199,8 +198,8 @@ def _measure(setup, nsteps, lib):
     nb = runners[0]
     row = {"scene": setup.scene.name, "method": setup.method.name, "steps": int(nb.done),
            "status": int(nb.status), "numba_ns": 1e9 * best[0] / max(nb.done, 1),
-           "c_ns": None, "ratio": None, "rel_diff": None, "agree": None}
-    if lib is not None:
+           "c_ns": None, "ratio": None, "rel_diff": None, "agree": None, "mirrored": mirrored}
+    if len(runners) > 1:
         c = runners[1]
         a = np.concatenate([nb.Z.ravel(), nb.PT])
         b = np.concatenate([c.Z.ravel(), c.PT])
@@ -225,8 +224,7 @@ def _table(rows, out):
             note.append(f"WARNING: C and numba differ (rel {r['rel_diff']:.1e})")
         out.write(f"{r['scene']:<10} {r['method']:<17} {r['steps']:>8} {r['numba_ns']:>14.1f} {c:>10} "
                   f"{ratio:>6}  {'; '.join(note)}".rstrip() + "\n")
-    unmirrored = sorted({r["method"] for r in rows if r["c_ns"] is None and _family(METHODS[r["method"]].data(
-        0.5 if METHODS[r["method"]].takes_theta else None)) is None})
+    unmirrored = sorted({r["method"] for r in rows if not r["mirrored"]})
     if unmirrored:
         out.write(f"no C mirror in bench_ref.c (numba figures only): {', '.join(unmirrored)}\n")
     rated = [r for r in rows if r["ratio"] is not None]

@@ -39,6 +39,12 @@ def distance(a, b, axis=-1):
         return 2.0 * norm(0.5 * a - 0.5 * b, axis=axis)
 
 
+def relative_error(z, z_ref):
+    """(|z - z_ref| / |z_ref|, |z - z_ref|) over all entries, without overflow."""
+    err = float(distance(np.ravel(z), np.ravel(z_ref)))
+    return err / max(float(norm(np.ravel(z_ref))), np.finfo(float).tiny), err
+
+
 def omega(X, Y):
     """Canonical 2-form sum_i X_qi Y_pi - X_pi Y_qi over the last axis (q then p)."""
     n = X.shape[-1] // 2

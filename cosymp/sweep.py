@@ -33,12 +33,12 @@ from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
 import numpy as np
 
-from .diagnostics import MapGrowth
+from .diagnostics import MapGrowth, relative_error
 from .errors import CosympError, InputError, as_number, quoted
 from .integrate import Setup, check_step, get_scene
 from .methods import method as get_method
 from .reference import check_reference, reference_final
-from .workprecision import _relative, check_horizon, scan
+from .workprecision import check_horizon, scan
 
 MEASURES = ("H_ext_max_abs", "det_max_dev", "error_final", "growth")
 RUN_NAMES = ("h", "T", "theta")
@@ -204,7 +204,7 @@ def figures(setup, h, T, measures):
         if growth is not None:
             out["growth"] = growth.log_norm() / (steps * h)
         if "error_final" in measures:
-            out["error_final"] = _relative(s.z, reference_final(setup, h, T)[0][0])[0]
+            out["error_final"] = relative_error(s.z, reference_final(setup, h, T)[0][0])[0]
     except CosympError as e:
         return {k: math.nan for k in measures}, str(e)
     return {k: out[k] for k in measures}, "ok"

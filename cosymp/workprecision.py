@@ -29,7 +29,7 @@ from functools import partial
 
 import numpy as np
 
-from .diagnostics import det_deviation, distance, norm, tangent_maps
+from .diagnostics import det_deviation, relative_error, tangent_maps
 from .errors import InputError, RunError
 from .integrate import MAX_STEPS, Setup, check_step, get_scene, simulate
 from .kernels.families import Composition, Exact, Explicit, Gauss, Splitting
@@ -118,11 +118,6 @@ def timed(call, budget):
     return result, best
 
 
-def _relative(z, z_ref):
-    err = float(distance(np.ravel(z), np.ravel(z_ref)))
-    return err / max(float(norm(np.ravel(z_ref))), np.finfo(float).tiny), err
-
-
 def peer_solve(setup, solver, T, rtol):
     """scipy's solve_ivp with `solver` at rtol = atol on the extended ODE."""
     return scipy_reference(setup, T, rtol=rtol, atol=rtol, method=solver)
@@ -148,7 +143,7 @@ def reference(setup, T):
         raise RunError(f"reference DOP853 failed: {sol.message}", T, 0)
     z_ref = sol.y[:-1, -1]
     rk8 = simulate(Setup.make(scene, "rk8", setup.values), T / steps, T, stride=steps)
-    return z_ref, f"scipy DOP853 rtol {REFERENCE_RTOL:g}", _relative(rk8.z[-1, 0], z_ref)[0]
+    return z_ref, f"scipy DOP853 rtol {REFERENCE_RTOL:g}", relative_error(rk8.z[-1, 0], z_ref)[0]
 
 
 @dataclasses.dataclass
@@ -207,7 +202,7 @@ def method_point(setup, h, T, z_ref, ref, unc, budget):
     row.update(h=h, steps=steps, rhs_evals=rhs_per_step(setup) * steps)
     try:
         run, row["wall_s"] = timed(lambda: simulate(setup, h, T, stride=steps), budget)
-        row["error"], row["error_abs"] = _relative(run.z[-1, 0], z_ref)
+        row["error"], row["error_abs"] = relative_error(run.z[-1, 0], z_ref)
         s = scan(setup, h, steps, with_det=setup.method.name != "exact")
         row["H_ext_max_abs"], row["det_max_dev"] = s.H_ext_max_abs, s.det_max_dev
     except RunError as e:
@@ -227,7 +222,7 @@ def peer_point(setup, solver, rtol, T, z_ref, ref, unc, budget):
         return row
     m = 2 * setup.scene.ndof
     row["wall_s"] = wall
-    row["error"], row["error_abs"] = _relative(sol.y[:m, -1], z_ref)
+    row["error"], row["error_abs"] = relative_error(sol.y[:m, -1], z_ref)
     H = np.empty((len(sol.t), 1))
     energies(setup.P, np.ascontiguousarray(sol.t), np.ascontiguousarray(sol.y[:m].T[:, None, :]), H)
     row["H_ext_max_abs"] = float(np.max(np.abs(H[:, 0] + sol.y[m])))
@@ -334,7 +329,7 @@ def drift(scene, methods=DRIFT_METHODS, values=None, h=None, horizons=None, thet
                     H_max = max(H_max, sc.H_ext_max_abs)
                     H = np.empty((1, 1))
                     energies(s.P, np.array([N * h]), z[None], H)
-                    row["error"], row["error_abs"] = _relative(z[0], refs[k])
+                    row["error"], row["error_abs"] = relative_error(z[0], refs[k])
                     row.update(H_ext_abs=abs(H[0, 0] + pt[0]), H_ext_max_abs=H_max, reference_uncertainty=unc[k])
             rows.append(row)
     report(total, total, "done")
@@ -359,7 +354,7 @@ def _drift_reference(setup, h, counts, report, total):
     fine, failed = _checkpoints(rk8, h / 2, [2 * N for N in counts], tick)
     coarse, _ = _checkpoints(rk8, h, counts[:len(fine)], tick)
     why = _beyond("the rk8 reference", counts[len(fine)] * h) if failed else ""
-    return fine, [_relative(c, f)[0] for f, c in zip(fine, coarse)], "rk8 at h/2", why
+    return fine, [relative_error(c, f)[0] for f, c in zip(fine, coarse)], "rk8 at h/2", why
 
 
 def _beyond(what, T):

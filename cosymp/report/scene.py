@@ -3,7 +3,7 @@ import shlex
 
 import numpy as np
 
-from ..diagnostics import distance, norm
+from ..diagnostics import relative_error
 from ..reference import reference_final
 from ..study import compare_until_failure
 from . import Figure, Report, Section, Series, Table
@@ -46,7 +46,7 @@ def scene_report(setups, h, T, cmd, progress=None, computed=None):
         err = None
         if c is not None and c.error is None and not failure:
             z_ref, _ = reference_final(s, h, T)
-            err = float(distance(c.run.z[-1, 0], z_ref[0]) / max(float(norm(z_ref[0])), np.finfo(float).tiny))
+            err = relative_error(c.run.z[-1, 0], z_ref[0])[0]
         runs.append((s, c, failure, err))
     report(total, total, "done")
     params = Table(["parameter", "value", "meaning"],

@@ -16,6 +16,13 @@ def unscaled(P, t):
     return 0, 0.0
 
 
+@njit(**INLINE)
+def free_drift(P, t0, tau, z):
+    """The drift of a separable scene with T = p^2/2 (one degree of freedom): q += tau p; p_t stays."""
+    z[0] += tau * z[1]
+    return 0.0 * z[0]
+
+
 @dataclass(frozen=True)
 class Param:
     """A scene parameter. Numeric unless choices is set; initial marks an initial condition."""

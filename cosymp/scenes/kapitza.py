@@ -5,7 +5,7 @@ import numpy as np
 from numba import njit
 
 from ..kernels.dispatch import INLINE
-from .base import Param, Scene, SceneKernel
+from .base import Param, Scene, SceneKernel, free_drift
 
 KapitzaParams = namedtuple("KapitzaParams", "w0 a nu")
 
@@ -47,13 +47,6 @@ def kick(P, C, r, tau, z):
     return tau * C[r, 1] * np.cos(z[0])
 
 
-@njit(**INLINE)
-def drift(P, t0, tau, z):
-    """The flow of T + p_t with T = p^2/2: q += tau p; p_t stays."""
-    z[0] += tau * z[1]
-    return 0.0 * z[0]
-
-
 SCENE = Scene(
     name="kapitza",
     title="Kapitza's pendulum (vertically driven pivot)",
@@ -74,7 +67,7 @@ SCENE = Scene(
         Param("p0", 0.0, "initial angular momentum p(0)", (-1e3, 1e3), initial=True),
     ),
     kernel=SceneKernel(ndof=1, ncoef=2, linear=False, coef=coef, energy=energy, grad=grad,
-                       hess=hess, dhdt=dhdt, kick=kick, drift=drift),
+                       hess=hess, dhdt=dhdt, kick=kick, drift=free_drift),
     Params=KapitzaParams,
     h=0.005,
     T=20.0,

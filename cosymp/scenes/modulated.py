@@ -6,7 +6,7 @@ from numba import njit
 
 from ..kernels.dispatch import INLINE
 from . import quadratic
-from .base import Param, Scene, SceneKernel
+from .base import Param, Scene, SceneKernel, free_drift
 
 ModulatedParams = namedtuple("ModulatedParams", "eps alpha")
 
@@ -18,13 +18,6 @@ def coef(P, t, C, r):
     C[r, 3] = 1.0
     C[r, 4] = P.eps * P.alpha * np.cos(P.alpha * t)
     quadratic.finish(P, C, r)
-
-
-@njit(**INLINE)
-def drift(P, t0, tau, z):
-    """The flow of T + p_t with T = p^2/2: q += tau p; p_t stays."""
-    z[0] += tau * z[1]
-    return 0.0 * z[0]
 
 
 SCENE = Scene(
@@ -46,7 +39,7 @@ SCENE = Scene(
     ),
     kernel=SceneKernel(ndof=1, ncoef=quadratic.ncoef(1), linear=True, coef=coef,
                        energy=quadratic.energy, grad=quadratic.grad, hess=quadratic.hess,
-                       dhdt=quadratic.dhdt, kick=quadratic.kick, drift=drift),
+                       dhdt=quadratic.dhdt, kick=quadratic.kick, drift=free_drift),
     Params=ModulatedParams,
     h=0.1,
     T=50.0,
