@@ -13,7 +13,7 @@ from . import warm
 from .errors import RunError
 from .integrate import failure_message
 from .kernels.families import OK
-from .kernels.loops import accumulate_product, exponents, tangent
+from .kernels.loops import tangent
 
 
 def J(n):
@@ -75,31 +75,36 @@ def tangent_maps(traj, member=0, last=False):
 class MapGrowth:
     """The largest finite-time growth exponent of a method's map along a run:
     ln(sigma_max(M_(K-1) ... M_0)) / t over the one-step tangent maps of every step (the largest
-    singular value of the run's linearised map: a finite-time Lyapunov exponent). Maps are added
-    chunk by chunk (`add`) and multiplied in a compiled loop that renormalises after each step,
-    so any horizon fits in floating point; scaled steps (the damped scene) are undone exactly."""
+    singular value of the run's linearised map: a finite-time Lyapunov exponent). The fused
+    driver (cosymp.drive) multiplies the maps into A as it steps, renormalising after each
+    step, so any horizon fits in floating point; scaled steps (the damped scene) are undone
+    exactly. state: (log of the scale taken out, the scaling exponent A is kept in, 1.0 while
+    every map was finite and non-singular)."""
 
     def __init__(self, m):
         self.A = np.eye(m)
-        self.state = np.zeros(2)
-        self.finite = True
+        self.state = np.array([0.0, 0.0, 1.0])
 
-    def add(self, setup, M, t):
-        """Apply the maps M[k] of the steps taken from the times t[k] (in order)."""
-        E = np.empty(len(t), dtype=np.int64)
-        exponents(setup.P, np.ascontiguousarray(t), E)
-        self.finite = self.finite and accumulate_product(M, E, self.A, self.state)
+    @property
+    def finite(self):
+        return self.state[2] == 1.0
 
     def log_norm(self):
         """ln sigma_max of the product so far (NaN if a map was not finite or was singular)."""
-        if not self.finite:
-            return math.nan
-        e = int(self.state[1])
-        n = len(self.A) // 2
-        A = self.A.copy()
-        A[:n] = np.ldexp(A[:n], e - abs(e))
-        A[n:] = np.ldexp(A[n:], -e - abs(e))
-        return float(self.state[0] + abs(e) * math.log(2.0) + math.log(np.linalg.norm(A, 2)))
+        return float(log_norms(self.A[None], self.state[None])[0])
+
+
+def log_norms(A, state):
+    """ln sigma_max of products kept as MapGrowth keeps them: A (B, m, m), state (B, 3)."""
+    e = state[:, 1].astype(int)
+    n = A.shape[1] // 2
+    A = A.copy()
+    A[:, :n] = np.ldexp(A[:, :n], (e - abs(e))[:, None, None])
+    A[:, n:] = np.ldexp(A[:, n:], (-e - abs(e))[:, None, None])
+    finite = state[:, 2] == 1.0
+    sigma = np.ones(len(A))
+    sigma[finite] = np.linalg.svd(A[finite], compute_uv=False)[:, 0]
+    return np.where(finite, state[:, 0] + abs(e) * math.log(2.0) + np.log(sigma), math.nan)
 
 
 def det_deviation(M):
@@ -107,10 +112,18 @@ def det_deviation(M):
     return np.abs(np.linalg.det(M) - 1.0)
 
 
-def symplecticity_defect(M):
-    """||M^T J M - J||_max per map."""
-    Jn = J(M.shape[-1] // 2)
-    return np.max(np.abs(np.swapaxes(M, 1, 2) @ (Jn @ M) - Jn), axis=(1, 2))
+def symplecticity_defect(M, relative=False):
+    """||M^T J M - J||_max per map; relative: divided by the largest sum of |terms| making up an
+    entry of M^T J M (scale-free: round-off level for a symplectic map of any size)."""
+    n = M.shape[-1] // 2
+    Jn = J(n)
+    D = np.max(np.abs(np.swapaxes(M, 1, 2) @ (Jn @ M) - Jn), axis=(1, 2))
+    if not relative:
+        return D
+    A = np.abs(M)
+    Aq, Ap = A[:, :n], A[:, n:]
+    S = np.swapaxes(Aq, 1, 2) @ Ap + np.swapaxes(Ap, 1, 2) @ Aq
+    return D / np.max(S, axis=(1, 2))
 
 
 def nearby_states(z0, delta, count):

@@ -145,6 +145,21 @@ def records(steps, stride):
     return steps // stride + 1 + (steps % stride != 0)
 
 
+def start_pt(setup, Z, t0, pt0=None):
+    """p_t of the members Z at t0: pt0 if given, else -H(z, t0) (so H + p_t starts at 0)."""
+    PT = np.empty(Z.shape[0])
+    if pt0 is not None:
+        PT[:] = pt0
+        return PT
+    H0 = np.empty((1, Z.shape[0]))
+    energies(setup.P, np.array([float(t0)]), Z[None], H0)
+    if not np.all(np.isfinite(H0)):
+        raise InputError(f"H at the start (t = {t0:g}) is not finite: the scene's coefficients or the "
+                         f"initial state overflow there; change the parameters (beta(t), B0, ...) or q0, p0")
+    PT[:] = -H0[0]
+    return PT
+
+
 def simulate(setup, h, T, z0=None, stride=None, increments=False, t0=0.0, pt0=None):
     """Run setup's method from t0 for T (rounded up to whole steps of h) on N initial states.
 
@@ -165,13 +180,7 @@ def simulate(setup, h, T, z0=None, stride=None, increments=False, t0=0.0, pt0=No
     if K * per_record > MAX_RECORDED:
         raise InputError(f"recording {K} states of {N} trajectories exceeds the memory cap "
                          f"({MAX_RECORDED:.0e} values): pass a larger stride")
-    PT = np.empty(N)
-    H0 = np.empty((1, N))
-    energies(setup.P, np.array([float(t0)]), Z[None], H0)
-    if pt0 is None and not np.all(np.isfinite(H0)):
-        raise InputError(f"H at the start (t = {t0:g}) is not finite: the scene's coefficients or the "
-                         f"initial state overflow there; change the parameters (beta(t), B0, ...) or q0, p0")
-    PT[:] = -H0[0] if pt0 is None else pt0
+    PT = start_pt(setup, Z, t0, pt0)
     Trec = np.empty(K)
     Zrec = np.empty((K, N, m))
     PTrec = np.empty((K, N))

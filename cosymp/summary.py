@@ -1,28 +1,18 @@
-"""Whole-run figures (maxima over every step), computed chunk by chunk in bounded memory."""
+"""Whole-run figures (maxima over every step) and long runs' envelopes, by the fused driver (cosymp.drive)."""
 import dataclasses
 import math
 import time
 
 import numpy as np
 
-from .diagnostics import (
-    det_deviation,
-    distance,
-    nearby_states,
-    norm,
-    paper_volume_form,
-    symplecticity_defect,
-    tangent_maps,
-)
+from .diagnostics import det_deviation, distance, nearby_states, norm, symplecticity_defect, tangent_maps
+from .drive import CHUNK, Drive
 from .errors import RunError
 from .integrate import Setup, check_step, simulate
 from .kernels.loops import energies
+from .kernels.survey import ACC, ENV
 from .reference import reference_final
 from .scenes import charged
-
-CHUNK = 1 << 18
-LONG_CHUNK_BYTES = 40_000_000
-ENVELOPES = ("H_min", "H_max", "vol_min", "vol_max", "det", "symp")
 
 
 def transport(traj, target):
@@ -56,35 +46,50 @@ def transported_maps(M, src, target, t, h):
     return DG(beta1, 1.0) @ M @ DG(beta, -1.0)
 
 
-def run_summary(setup, h, T, transport_from=None, with_error=True, progress=None):
-    """The CLI's figures for one run: finals, max |H + p_t|, max |det M - 1|, max symplecticity
-    defect over every step, the error at T against the exact flow or the reference, wall time."""
-    steps = check_step(h, T)
-    source = setup.with_values(gauge=transport_from) if transport_from else setup
-    z0 = None
-    pt0 = None
+def _transported_run(setup, h, steps, source, progress):
+    """The run in gauge `source`, shown in setup's gauge (transport): (final Trajectory,
+    figures, compiled seconds). Every step is recorded, chunk by chunk, and transported."""
+    z0 = pt0 = None
     done = 0
     wall = 0.0
-    H_max = det_max = symp_max = 0.0
-    start = time.perf_counter()
+    fig = dict.fromkeys(("H_ext_max_abs", "det_max_dev", "symp_max_dev", "symp_max_rel"), 0.0)
     while done < steps:
         n = min(CHUNK, steps - done)
         tr = simulate(source, h, n * h, z0=z0, stride=1, t0=done * h, pt0=pt0)
         wall += tr.wall_s
-        M = tangent_maps(tr)
-        if transport_from:
-            M = transported_maps(M, source, setup, tr.t[:-1], h)
-            shown = transport(tr, setup)
-        else:
-            shown = tr
-        H_max = max(H_max, float(np.max(np.abs(shown.H_ext))))
-        det_max = max(det_max, float(np.max(det_deviation(M))))
-        symp_max = max(symp_max, float(np.max(symplecticity_defect(M))))
+        M = transported_maps(tangent_maps(tr), source, setup, tr.t[:-1], h)
+        shown = transport(tr, setup)
+        for key, values in (("H_ext_max_abs", np.abs(shown.H_ext)), ("det_max_dev", det_deviation(M)),
+                            ("symp_max_dev", symplecticity_defect(M)),
+                            ("symp_max_rel", symplecticity_defect(M, relative=True))):
+            fig[key] = max(fig[key], float(np.max(values)))
         z0, pt0 = tr.z[-1], tr.pt[-1]
         done += n
         if progress:
             progress(done, steps)
-    final = shown
+    return shown, fig, wall
+
+
+def run_summary(setup, h, T, transport_from=None, with_error=True, progress=None):
+    """The CLI's figures for one run: finals, max |H + p_t|, max |det M - 1|, max symplecticity
+    defect (absolute and relative) over every step, the error at T against the exact flow or
+    the reference, wall time (wall_s: the compiled run with its diagnostics)."""
+    steps = check_step(h, T)
+    start = time.perf_counter()
+    if transport_from:
+        final, fig, wall = _transported_run(setup, h, steps, setup.with_values(gauge=transport_from), progress)
+        t, z, pt, H_ext = final.t[-1], final.z[-1, 0], final.pt[-1, 0], final.H_ext[-1, 0]
+    else:
+        drive = Drive(setup, h)
+        began = time.perf_counter()
+        drive.run(steps, progress)
+        wall = time.perf_counter() - began
+        fig = {k: float(v) for k, v in zip(ACC, drive.acc)}
+        t, z, pt = drive.t, drive.Z[0], drive.PT[0]
+        H = np.empty((1, 1))
+        energies(setup.P, np.array([t]), drive.Z[None, :1], H)
+        H_ext = H[0, 0] + pt
+    n = setup.scene.ndof
     out = {
         "scene": setup.scene.name,
         "method": setup.method.name,
@@ -94,71 +99,40 @@ def run_summary(setup, h, T, transport_from=None, with_error=True, progress=None
         "h": h,
         "T": T,
         "steps": steps,
-        "t_final": float(final.t[-1]),
-        "q_final": final.q[-1, 0].tolist(),
-        "p_final": final.p[-1, 0].tolist(),
-        "pt_final": float(final.pt[-1, 0]),
-        "H_ext_final": float(final.H_ext[-1, 0]),
-        "H_ext_max_abs": H_max,
-        "det_max_dev": det_max,
-        "symp_max_dev": symp_max,
+        "t_final": float(t),
+        "q_final": z[:n].tolist(),
+        "p_final": z[n:].tolist(),
+        "pt_final": float(pt),
+        "H_ext_final": float(H_ext),
+        **fig,
         "error_final": None,
         "reference": None,
         "wall_s": wall,
     }
     if setup.scene.name == "charged":
-        Pi = charged.mechanical(setup.P, final.t[-1:], final.q[-1:, 0], final.p[-1:, 0])
+        Pi = charged.mechanical(setup.P, np.array([t]), z[None, :n], z[None, n:])
         out["Pi_final"] = Pi[0].tolist()
     if with_error:
         zr, spread = reference_final(setup, h, T)
         scale = max(float(norm(zr[0])), np.finfo(float).tiny)  # relative, as the app, reports and sweeps give it
-        out["error_final"] = float(distance(final.z[-1, 0], zr[0])) / scale
+        out["error_final"] = float(distance(z, zr[0])) / scale
         out["reference"] = "exact flow" if setup.scene.has_flow else "rk8 (fine fixed step)"
         out["reference_uncertainty"] = float(spread[0]) / scale
     out["wall_total_s"] = time.perf_counter() - start
     return out
 
 
-def bin_reduce(values, width, op):
-    """op (np.minimum or np.maximum) over consecutive bins of `width` values."""
-    return op.reduceat(values, np.arange(0, len(values), width))
-
-
 def long_chunk(setup, h, steps, Z, PT, start, width):
     """Advance the ensemble Z (member 0 the trajectory, 1.. the nearby states) by `steps` steps
     from step `start`; returns (per-bin reductions or None, Z, PT, failure message). The
-    reductions over bins of `width` steps: t (bin starts), min and max of H + p_t and of the
-    paper's volume estimator, max of |det M_k - 1| and of ||M_k^T J M_k - J||."""
-    failure = ""
-    try:
-        tr = simulate(setup, h, steps * h, z0=Z, stride=1, increments=True, t0=start * h, pt0=PT)
-    except RunError as err:
-        tr, failure = err.partial, str(err)
-    if len(tr.t) < 2:
-        return None, Z, PT, failure
-    try:
-        M = tangent_maps(tr)
-    except RunError as err:
-        return None, Z, PT, failure or str(err)
-    H = tr.H_ext[1:, 0]
-    vol = paper_volume_form(tr)
-    out = {
-        "t": tr.t[1:][::width],
-        "H_min": bin_reduce(H, width, np.minimum),
-        "H_max": bin_reduce(H, width, np.maximum),
-        "vol_min": bin_reduce(vol, width, np.minimum),
-        "vol_max": bin_reduce(vol, width, np.maximum),
-        "det": bin_reduce(det_deviation(M), width, np.maximum),
-        "symp": bin_reduce(symplecticity_defect(M), width, np.maximum),
-    }
-    return out, np.ascontiguousarray(tr.z[-1]), np.ascontiguousarray(tr.pt[-1]), failure
-
-
-def max_chunk(setup):
-    """Steps per chunk that keep one chunk's records and tangent maps under LONG_CHUNK_BYTES."""
-    m = 2 * setup.scene.ndof
-    members = m + 2
-    return max(1, LONG_CHUNK_BYTES // (members * (m + 1) * 3 * 8 + m * m * 8))
+    reductions over bins of `width` steps (kernels.survey.ENV): t (the time after each bin's
+    first step), min and max of H + p_t and of the paper's volume estimator, max of
+    |det M_k - 1| and of ||M_k^T J M_k - J||."""
+    drive = Drive(setup, h, z0=Z, pt0=PT, t0=start * h, width=width)
+    bins = drive.advance(steps)
+    if bins is None or not len(bins["t"]):
+        return None, Z, PT, drive.failure
+    return bins, drive.Z, drive.PT, drive.failure
 
 
 def long_envelopes(setup, h, T, bins, delta=1e-4, progress=None):
@@ -166,22 +140,14 @@ def long_envelopes(setup, h, T, bins, delta=1e-4, progress=None):
     at most `bins` bins (see long_chunk); returns (dict of arrays, failure message)."""
     steps = check_step(h, T)
     width = max(1, math.ceil(steps / bins))
-    chunk = width * max(1, max_chunk(setup) // width)
     n = setup.scene.ndof
-    Z, PT = nearby_states(setup.start[0], delta, 2 * n + 1), None
-    parts = []
-    done = 0
-    failure = ""
-    while done < steps and not failure:
-        k = min(chunk, steps - done)
-        red, Z, PT, failure = long_chunk(setup, h, k, Z, PT, done, width)
-        if red is not None:
-            parts.append(red)
-        done += k
-        if progress:
-            progress(done, steps)
-    keys = ("t",) + ENVELOPES
-    return {k: np.concatenate([p[k] for p in parts]) if parts else np.empty(0) for k in keys}, failure
+    drive = Drive(setup, h, z0=nearby_states(setup.start[0], delta, 2 * n + 1), width=width)
+    try:
+        out = drive.run(steps, progress)
+    except RunError:
+        out = None
+    keys = ("t",) + ENV
+    return out or {k: np.empty(0) for k in keys}, drive.failure
 
 
 def paper_volume_run(h=0.1, T=5e5, gamma=2e-4, methods=("midpoint", "rk4"), delta=1e-4):

@@ -33,7 +33,8 @@ from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
 import numpy as np
 
-from .diagnostics import MapGrowth, relative_error
+from .diagnostics import relative_error
+from .drive import batch_runs, batchable
 from .errors import CosympError, InputError, as_number, quoted
 from .integrate import Setup, check_step, get_scene
 from .methods import method as get_method
@@ -41,6 +42,8 @@ from .reference import check_reference, reference_final
 from .workprecision import check_horizon, scan
 
 MEASURES = ("H_ext_max_abs", "det_max_dev", "error_final", "growth")
+BATCHED_MEASURES = {"H_ext_max_abs", "det_max_dev", "growth"}
+BATCH = 256
 RUN_NAMES = ("h", "T", "theta")
 MAX_POINTS = 1_000_000
 MAX_AXIS = 10_000
@@ -118,8 +121,13 @@ class Plan:
 
     def point(self, index):
         """{name: value} of the varied names at flat index (C order: the first axis slowest)."""
-        idx = np.unravel_index(index, self.shape)
-        return {a.name: a.values[i] for a, i in zip(self.axes, idx)}
+        return self.points([index])[0]
+
+    def points(self, indices):
+        """point() of each flat index."""
+        idx = np.unravel_index(np.asarray(indices, dtype=np.int64), self.shape)
+        cols = [np.asarray(a.values)[i].tolist() for a, i in zip(self.axes, idx)]
+        return [dict(zip([a.name for a in self.axes], vals)) for vals in zip(*cols)]
 
     def step_counts(self):
         """(steps of each (h, T) pair of the grid, how many points share each pair): from the h and
@@ -198,8 +206,8 @@ def figures(setup, h, T, measures):
     out = dict.fromkeys(measures, math.nan)
     try:
         steps = check_step(h, T)
-        growth = MapGrowth(2 * setup.scene.ndof) if "growth" in measures else None
-        s = scan(setup, h, steps, with_det="det_max_dev" in measures, growth=growth)
+        s, growth = scan(setup, h, steps, with_det="det_max_dev" in measures, growth="growth" in measures,
+                         energy="H_ext_max_abs" in measures)
         out["H_ext_max_abs"], out["det_max_dev"] = s.H_ext_max_abs, s.det_max_dev
         if growth is not None:
             out["growth"] = growth.log_norm() / (steps * h)
@@ -212,24 +220,79 @@ def figures(setup, h, T, measures):
 
 def evaluate(p, indices, stop=None):
     """Figures of the points at flat indices, in order: (indices, {measure: array}, statuses,
-    seconds). Stops early (fewer points) once `stop` (a threading.Event) is set."""
+    seconds). Stops early (fewer points) once `stop` (a threading.Event) is set. Points that
+    share a run (h, T, theta) and differ in scene parameters run BATCH at a time in one compiled
+    call (drive.batch_runs) where the measures allow it; the others, and any point of a batch
+    that failed (for its message), one by one (figures)."""
     start = time.perf_counter()
     cols = {k: [] for k in p.measures}
     statuses = []
     done = []
-    for i in indices:
-        if stop is not None and stop.is_set():
-            break
-        try:
-            setup, h, T = p.run_of(p.point(i))
-            values, status = figures(setup, h, T, p.measures)
-        except InputError as e:
-            values, status = {k: math.nan for k in p.measures}, str(e)
-        for k in p.measures:
-            cols[k].append(values[k])
-        statuses.append(status)
-        done.append(i)
+    indices = list(indices)
+    batched = _batched(p)
+    points = p.points(indices)
+    pos = 0
+    while pos < len(indices) and not (stop is not None and stop.is_set()):
+        group = indices[pos:pos + (BATCH if batched else 1)]
+        if batched:
+            key = _run_key(points[pos])
+            group = group[:next((j for j in range(1, len(group)) if _run_key(points[pos + j]) != key), len(group))]
+            results = _batch_figures(p, points[pos:pos + len(group)])
+        else:
+            results = [_point_figures(p, points[pos])]
+        for values, status in results:
+            for k in p.measures:
+                cols[k].append(values[k])
+            statuses.append(status)
+        done.extend(group)
+        pos += len(group)
     return done, {k: np.array(v, dtype=float) for k, v in cols.items()}, statuses, time.perf_counter() - start
+
+
+def _point_figures(p, point):
+    try:
+        setup, h, T = p.run_of(point)
+        return figures(setup, h, T, p.measures)
+    except InputError as e:
+        return {k: math.nan for k in p.measures}, str(e)
+
+
+def _batched(p):
+    """Whether the plan's points can run in batches: measures of the run alone (no reference), a
+    method with maps where maps are measured, and a scene whose parameters are all numbers."""
+    if not set(p.measures) <= BATCHED_MEASURES:
+        return False
+    return batchable(p.run_of(p.point(0))[0])
+
+
+def _run_key(point):
+    return tuple(point.get(name) for name in RUN_NAMES)
+
+
+def _batch_figures(p, points):
+    """[(measures, status)] of points sharing a run, from one compiled call; a failed point is
+    run again on its own for its message."""
+    setup, h, T = p.run_of(points[0])
+    scene = setup.scene
+    fixed = dict(p.values)
+    rows, starts = [], []
+    for point in points:
+        vals = scene.values({**fixed, **{k: v for k, v in point.items() if k not in RUN_NAMES}})
+        rows.append(tuple(scene.pack(vals)))
+        starts.append(np.concatenate(scene.initial(vals)))
+    steps = check_step(h, T)
+    out = batch_runs(setup, h, steps, np.array(rows), np.array(starts), with_det="det_max_dev" in p.measures,
+                     growth="growth" in p.measures, energy="H_ext_max_abs" in p.measures)
+    results = []
+    for j, point in enumerate(points):
+        if out["failed"][j]:
+            results.append(_point_figures(p, point))
+            continue
+        values = {"H_ext_max_abs": out["H_ext_max_abs"][j], "det_max_dev": out["det_max_dev"][j]}
+        if "growth" in p.measures:
+            values["growth"] = out["growth"][j] / (steps * h)
+        results.append(({k: float(values[k]) for k in p.measures}, "ok"))
+    return results
 
 
 @dataclasses.dataclass

@@ -69,7 +69,8 @@ def _families(scene):
 
 def _exercise(setup):
     """A few steps through every compiled path a run of this setup can take."""
-    from .diagnostics import MapGrowth, nearby_states, tangent_maps
+    from .diagnostics import nearby_states, tangent_maps
+    from .drive import Drive, batch_runs, batchable
     from .integrate import simulate
     from .reference import scipy_reference
     from .summary import transport
@@ -78,10 +79,12 @@ def _exercise(setup):
     m = 2 * setup.scene.ndof
     single = simulate(setup, h, 4 * h)
     ensemble = simulate(setup, h, 4 * h, z0=nearby_states(setup.start[0], 1e-4, m + 1), increments=True)
-    M = tangent_maps(single, last=True)
+    tangent_maps(single, last=True)
     tangent_maps(ensemble)
-    growth = MapGrowth(m)
-    growth.add(setup, M, single.t)
+    Drive(setup, h, growth=True).run(4)
+    Drive(setup, h, z0=ensemble.z[0], width=2).run(4)
+    if batchable(setup):
+        batch_runs(setup, h, 4, [tuple(setup.P)], setup.start, growth=True)
     scipy_reference(setup, 2 * h)
     if "gauge" in setup.values:
         transport(single, setup)

@@ -29,7 +29,8 @@ from functools import partial
 
 import numpy as np
 
-from .diagnostics import det_deviation, relative_error, tangent_maps
+from .diagnostics import relative_error
+from .drive import CHUNK, Drive, map_every
 from .errors import InputError, RunError
 from .integrate import MAX_STEPS, Setup, check_step, get_scene, simulate
 from .kernels.families import Composition, Exact, Explicit, Gauss, Splitting
@@ -55,8 +56,6 @@ DRIFT_MAX_STEPS = 10_000_000
 REFERENCE_SHORT = "reference not finite"
 REFERENCE_RTOL = 3e-14
 MAX_REPEATS = 50
-DIAG_MAPS = 1 << 16
-CHUNK = 1 << 18
 ERROR_FLOOR = 1e-13
 STEP_GROWTH = math.sqrt(2.0)
 
@@ -157,34 +156,18 @@ class Scan:
     det_max_dev: float
 
 
-def scan(setup, h, steps, z0=None, pt0=None, t0=0.0, with_det=True, maps=DIAG_MAPS, tick=None, growth=None):
-    """Run steps of h from t0 in chunks, recording every step; max |H + p_t| over every step
-    and max |det M_k - 1| over every step or over `maps` evenly spaced ones (RunError on failure).
-    growth: a diagnostics.MapGrowth that takes the tangent map of every step (then det is
-    over every step too). tick() is called after each chunk."""
-    every = 1 if growth is not None else max(1, math.ceil(steps / maps))
-    chunk = every * max(1, CHUNK // every)
-    done = 0
-    H_max = 0.0
-    det_max = 0.0 if with_det else math.nan
-    t = t0
-    while done < steps:
-        n = min(chunk, steps - done)
-        tr = simulate(setup, h, n * h, z0=z0, stride=1, t0=t, pt0=pt0)
-        H_max = max(H_max, float(np.max(np.abs(tr.H_ext[:, 0]))))
-        if with_det or growth is not None:
-            sample = dataclasses.replace(tr, t=tr.t[:-1:every], z=tr.z[:-1:every], pt=tr.pt[:-1:every])
-            M = tangent_maps(sample, last=True)
-            if with_det:
-                det_max = max(det_max, float(np.max(det_deviation(M))))
-            if growth is not None:
-                growth.add(setup, M, sample.t)
-        z0, pt0 = tr.z[-1], tr.pt[-1]
-        t = t0 + (done + n) * h
-        done += n
-        if tick:
-            tick()
-    return Scan(z0[0], float(pt0[0]), t, H_max, det_max)
+def scan(setup, h, steps, z0=None, pt0=None, t0=0.0, with_det=True, tick=None, growth=False,
+         energy=True):
+    """Run steps of h from t0 by the fused driver: max |H + p_t| over every step (NaN without
+    `energy`) and max |det M_k - 1| over every step or over DIAG_MAPS evenly spaced ones (RunError
+    on failure). growth: also multiply every step's tangent map (then det is over every step
+    too); returns (Scan, the driver's diagnostics.MapGrowth or None). tick() is called after
+    each chunk."""
+    every = map_every(steps, with_det, growth)
+    drive = Drive(setup, h, z0=z0, pt0=pt0, t0=t0, every=every, growth=growth, energy=energy, maps=with_det)
+    drive.run(steps, tick and (lambda done, total: tick()))
+    det = drive.det_max_dev if with_det else math.nan
+    return Scan(drive.Z[0], float(drive.PT[0]), drive.t, drive.H_ext_max_abs, det), drive.growth
 
 
 def _base_row(scene, name, kind, order, preserves, T, ref, unc):
@@ -203,7 +186,7 @@ def method_point(setup, h, T, z_ref, ref, unc, budget):
     try:
         run, row["wall_s"] = timed(lambda: simulate(setup, h, T, stride=steps), budget)
         row["error"], row["error_abs"] = relative_error(run.z[-1, 0], z_ref)
-        s = scan(setup, h, steps, with_det=setup.method.name != "exact")
+        s = scan(setup, h, steps, with_det=setup.method.name != "exact")[0]
         row["H_ext_max_abs"], row["det_max_dev"] = s.H_ext_max_abs, s.det_max_dev
     except RunError as e:
         row.update(wall_s=math.nan, error=math.nan, error_abs=math.nan, status=str(e))
@@ -321,7 +304,7 @@ def drift(scene, methods=DRIFT_METHODS, values=None, h=None, horizons=None, thet
                 row["status"] = ref_failure
             elif not failure:
                 try:
-                    sc = scan(s, h, N - done, z0=z, pt0=pt, t0=done * h, with_det=False, tick=tick)
+                    sc = scan(s, h, N - done, z0=z, pt0=pt, t0=done * h, with_det=False, tick=tick)[0]
                 except RunError as e:
                     failure = row["status"] = str(e)
                 else:

@@ -151,10 +151,10 @@ def test_bad_maps_are_a_message_and_the_last_map_stays(tongue, change, needle):
 
 
 def test_the_lease_bounds_the_measured_peak_and_is_given_back(monkeypatch):
-    """The charged particle at small steps (the largest per-step records and 4 x 4 maps): the
-    lease is at least tracemalloc's peak (numpy's arrays included) and at most four times it
-    (its threads' chunks may not all peak at once); it is returned when the map is done (the
-    study keeps its own comparison's lease)."""
+    """The charged particle at small steps (runs of many chunks, 4 x 4 maps): the lease is at
+    least tracemalloc's peak (numpy's arrays included) and at most 2 MB above it (the fused
+    driver keeps nothing per step, so a lease sized by the steps would hold back other runs for
+    nothing); it is returned when the map is done (the study keeps its own comparison's lease)."""
     budget = memory.MemoryBudget(cap_bytes=1 << 32)
     monkeypatch.setattr(memory, "BUDGET", budget)
     leased = []
@@ -170,7 +170,7 @@ def test_the_lease_bounds_the_measured_peak_and_is_given_back(monkeypatch):
     tracemalloc.stop()
     assert m.status.startswith("done") and budget.used == held
     print(f"stability map: lease {leased[-1] / 1e6:.0f} MB, peak {peak / 1e6:.0f} MB")
-    assert peak <= leased[-1] <= 4 * peak
+    assert peak <= leased[-1] <= peak + (2 << 20)
     assert math.ceil(60.0 / 1e-4) > wp.CHUNK
 
 

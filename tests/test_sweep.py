@@ -438,13 +438,14 @@ def test_exception_from_progress_stops_the_sweep(monkeypatch):
     p = sweep.plan("modulated", "midpoint", ["eps=0:0.4:12", "alpha=1.8:2.2:12"], ["growth"], h=0.05,
                    T=100.0)
     computed = []
-    real = sweep.figures
+    real = sweep.evaluate
 
     def counting(*args):
-        computed.append(1)
-        return real(*args)
+        out = real(*args)
+        computed.extend(out[0])
+        return out
 
-    monkeypatch.setattr(sweep, "figures", counting)
+    monkeypatch.setattr(sweep, "evaluate", counting)
 
     class Stop(Exception):
         pass

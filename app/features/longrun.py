@@ -12,9 +12,10 @@ import panel as pn
 import param
 
 from cosymp.diagnostics import nearby_states
+from cosymp.drive import CHUNK
 from cosymp.integrate import check_step
 from cosymp.report.style import pair_colors
-from cosymp.summary import long_chunk, max_chunk
+from cosymp.summary import long_chunk
 
 from ..jobs import Job, Note
 from ..plotting import SLOTS, Pair, figure, grid, note, pane, series, swatch, zero_floor
@@ -25,7 +26,7 @@ from .base import Feature, FeatureView
 LONG_BINS = 20_000
 LONG_CHUNK_SECONDS = 0.3
 LONG_DRAW_SECONDS = 1.0  # the envelopes are published at most this often (each redraw costs the event loop)
-LONG_RUN_BYTES = 256 << 20  # measured peak 179 MB at any horizon (chunked)
+LONG_RUN_BYTES = 32 << 20  # measured peak 3.1 MB at any horizon, 2.2 MB of it the envelopes (tests/test_app_state.py)
 KEYS = ("t", "H_min", "H_max", "vol_min", "vol_max", "det", "symp")
 
 
@@ -101,7 +102,7 @@ class LongRun(Job):
     def _compute(self, inputs, run):
         setups, h, steps, _, _ = inputs
         width = max(1, math.ceil(steps / LONG_BINS))
-        cap = width * max(1, min(max_chunk(x) for x in setups) // width)
+        cap = width * max(1, CHUNK // width)
         found = [LongSeries(x.method.label(x.theta), x.method.name) for x in setups]
         states = [(nearby_states(x.start[0], DELTA, 2 * x.scene.ndof + 1), None) for x in setups]
         active = [True] * len(setups)

@@ -1,0 +1,176 @@
+"""The fused driver: runs whose figures are reduced as they go, in one compiled pass.
+
+`Drive` advances one trajectory (member 0), or with 2n + 2 members also the paper's volume
+estimator's nearby states, and keeps what `run`, the long run, work-precision and sweeps show:
+max |H + p_t|, max |det M_k - 1| and the symplecticity defect (absolute and scale-free) of the
+one-step tangent maps, the growth product of those maps, and per-bin envelopes; nothing per
+step. A run is cut into compiled calls of at most CHUNK steps (the one chunking policy: each
+call's end is a point for progress and cancel).
+"""
+import math
+
+import numpy as np
+
+from . import warm
+from .diagnostics import MapGrowth, log_norms
+from .errors import RunError
+from .integrate import _exact_overflows, check_step, failure_message, initial_states, start_pt
+from .kernels.families import OK
+from .kernels.survey import ACC, ENV, WANT_H, WANT_MAPS, batch, survey
+
+CHUNK = 1 << 18
+DIAG_MAPS = 1 << 16
+
+
+def map_every(steps, det=True, growth=False):
+    """Which steps' tangent maps a run forms: every step for the growth product, every step or
+    at most DIAG_MAPS evenly spaced ones for det and symplecticity alone, none otherwise."""
+    return 1 if growth else (max(1, math.ceil(steps / DIAG_MAPS)) if det else 0)
+
+
+class Drive:
+    """A run advanced by compiled calls of the fused loop (kernels.survey).
+
+    every: form member 0's tangent map at every `every`-th step (0: never; growth needs 1);
+    width: bin width in steps of the envelopes (0: none); growth: keep the product of the maps
+    (a diagnostics.MapGrowth); energy, maps: whether to reduce max |H + p_t| and the maps'
+    det and symplecticity (a figure not asked for is NaN and costs nothing). Calls of `advance`
+    continue the run as one call would (the steps are numbered from the run's start); bins and
+    the maps' sampling are counted from the run's first step when each call's length is a
+    multiple of `unit`.
+    """
+
+    def __init__(self, setup, h, z0=None, pt0=None, t0=0.0, every=1, width=0, growth=False, energy=True,
+                 maps=True):
+        if growth and every != 1:
+            raise ValueError("the growth product needs every step's map (every = 1)")
+        self.setup = setup
+        self.h = float(h)
+        check_step(self.h, self.h)
+        warm.ensure(setup)
+        self.Z = initial_states(setup, z0)
+        self.PT = start_pt(setup, self.Z, t0, pt0)
+        self._sum, self._comp = self.PT.copy(), np.zeros_like(self.PT)
+        self.t0 = float(t0)
+        self.t = self.t0
+        self.done = 0
+        self.every = int(every)
+        self.width = int(width)
+        m = 2 * setup.scene.ndof
+        self.growth = MapGrowth(m) if growth else None
+        self._G = self.growth.A if growth else np.empty((0, 0))
+        self._gstate = self.growth.state if growth else np.zeros(3)
+        self.want = (WANT_H if energy or width else 0) | (WANT_MAPS if maps and every else 0)
+        self.acc = np.zeros(len(ACC))
+        if not self.want & WANT_H:
+            self.acc[0] = math.nan
+        if not self.want & WANT_MAPS:
+            self.acc[1:] = math.nan
+        self.failure = ""
+        self.unit = math.lcm(max(1, self.every), max(1, self.width))
+
+    @property
+    def H_ext_max_abs(self):
+        return float(self.acc[0])
+
+    @property
+    def det_max_dev(self):
+        return float(self.acc[1])
+
+    @property
+    def symp_max_dev(self):
+        return float(self.acc[2])
+
+    @property
+    def symp_max_rel(self):
+        return float(self.acc[3])
+
+    def advance(self, steps):
+        """One compiled call of `steps` steps. Returns this call's bins ({"t": ..., ENV: ...},
+        or None without width). A failure (overflow, Newton) stops the run: its message is kept
+        in `failure`, the bins and state are those before the failing step, and later calls
+        do nothing."""
+        if self.failure:
+            return None
+        s = self.setup
+        N, m = self.Z.shape
+        bins = -(-steps // self.width) if self.width else 0
+        env = np.empty((bins, len(ENV)))
+        env[:, 0::2] = math.inf
+        env[:, 1::2] = -math.inf
+        env[:, 4:] = 0.0 if self.want & WANT_MAPS else math.nan
+        tb = np.empty(bins)
+        Trec, Zrec, PTrec = np.empty(2), np.empty((2, N, m)), np.empty((2, N))
+        status, k, in_tangent = survey(s.data, s.P, self.t0, self.done, self.h, self.Z, self.PT, self._sum,
+                                             self._comp, steps, steps, Trec, Zrec, PTrec, self.every, self.want, self.width,
+                                             self.acc, env, tb, self._G, self._gstate)
+        self.done += k
+        self.t = self.t0 + self.done * self.h
+        if status != OK:
+            step = round(self.t0 / self.h) + self.done
+            msg = failure_message(status, step, self.t, self.h, not in_tangent and _exact_overflows(s, self.t))
+            self.failure = f"tangent map: {msg}" if in_tangent else msg
+            bins = -(-k // self.width) if self.width else 0
+        if not self.width:
+            return None
+        out = {"t": tb[:bins]}
+        out.update({name: env[:bins, j] for j, name in enumerate(ENV)})
+        if N < m + 2:
+            out["vol_min"] = out["vol_max"] = np.full(bins, math.nan)
+        return out
+
+    def run(self, steps, progress=None):
+        """advance() in calls of at most CHUNK steps (a multiple of `unit`), progress(done, steps)
+        after each; returns the bins concatenated ({} without width). Raises RunError on a
+        failure."""
+        chunk = self.unit * max(1, CHUNK // self.unit)
+        parts = []
+        start = self.done
+        while self.done - start < steps and not self.failure:
+            part = self.advance(min(chunk, steps - (self.done - start)))
+            if part is not None:
+                parts.append(part)
+            if progress:
+                progress(self.done - start, steps)
+        if self.failure:
+            raise RunError(self.failure, self.t, self.done)
+        return concat(parts)
+
+
+def concat(parts):
+    """Bins of consecutive advance() calls as one dict of arrays ({} for none)."""
+    if not parts:
+        return {}
+    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+
+def batchable(setup):
+    """Whether runs of the setup's scene can be batched over parameter sets (kernels.survey.batch
+    builds each set from a row of floats)."""
+    return all(isinstance(v, float) for v in setup.P)
+
+
+def batch_runs(setup, h, steps, R, Z0, with_det=True, growth=False, energy=True):
+    """Runs of setup's method, one per row of R (the scene's parameter tuples) from Z0's rows, in
+    one compiled call (kernels.survey.batch), each reduced as scan() reduces one run: returns
+    {ACC name: (B,) array (NaN where not asked for), "growth": ln sigma_max of each product or
+    None, "failed": (B,) bool}. A failed run's figures are not meaningful: run it alone for its
+    message."""
+    warm.ensure(setup)
+    B, m = Z0.shape
+    every = map_every(steps, with_det, growth)
+    want = (WANT_H if energy else 0) | (WANT_MAPS if with_det and every else 0)
+    acc = np.zeros((B, len(ACC)))
+    G = np.tile(np.eye(m), (B, 1, 1)) if growth else np.empty((B, 0, 0))
+    gstate = np.tile([0.0, 0.0, 1.0], (B, 1))
+    status = np.zeros((B, 2), dtype=np.int64)
+    batch(setup.data, setup.P, np.ascontiguousarray(R, dtype=float), np.ascontiguousarray(Z0, dtype=float), float(h),
+          int(steps), every, want, acc, G, gstate, status)
+    if not want & WANT_H:
+        acc[:, 0] = math.nan
+    if not want & WANT_MAPS:
+        acc[:, 1:] = math.nan
+    out = {name: acc[:, j] for j, name in enumerate(ACC)}
+    out["growth"] = log_norms(G, gstate) if growth else None
+    out["failed"] = status[:, 0] != OK
+    return out

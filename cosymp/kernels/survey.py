@@ -1,0 +1,396 @@
+"""The fused driver's compiled loops: step, form each step's tangent map, reduce the diagnostics.
+
+One pass per call, nothing stored per step: member 0's one-step tangent map M_k (the step
+matrix on a linear scene, a complex step of the member step otherwise, in the step's scaled
+coordinates as kernels.loops.tangent_matrix and tangent_complex give it) feeds the running
+maxima of |det M_k - 1| and of the symplecticity defect, and the growth product; H + p_t of
+member 0 feeds its running maximum; with 2n + 2 members, members 1..2n+1 give the paper's
+volume estimator det[X^1 ... X^(2n+1)] of their increments; and each of these is also reduced
+to per-bin minima and maxima over bins of `width` steps. States are recorded at a stride, as
+kernels.loops.propagate_members records them.
+
+Arguments shared by both loops (those of propagate_members without dZrec, and first: the steps
+are numbered from `first`, at times t0 + (first + k) h, and S, Cc: p_t's compensated sum and its
+compensation, carried from call to call, so that a run cut into calls takes the same steps as
+one call): every: form member 0's tangent map at the steps k with k % every == 0 (0:
+never); want: which figures to reduce (WANT_H: H + p_t; WANT_MAPS: det and symplecticity of the
+maps), the growth product being kept wherever G is given;
+acc: running maxima (ACC_*), updated in place; env: (bins, len(ENV)) per-bin reductions of this
+call (bin b holds steps b*width .. (b+1)*width - 1; rows preset by the caller), tb (bins,) the
+time after each bin's first step; G: the growth product (m x m, or 0 x 0 for none) and gstate
+its (log scale, exponent, 1.0 while finite) as in diagnostics.MapGrowth. Each returns
+(status, k, in_tangent): k steps completed, and whether a failure came from the tangent map's
+complex step.
+"""
+import math
+
+import numpy as np
+from numba import njit
+from numba.core import types
+from numba.core.errors import TypingError
+from numba.extending import overload
+from numba.np.unsafe.ndarray import to_fixed_tuple
+
+from .borrow import borrow
+from .dispatch import _INLINE, INLINE, JIT, coef, energy, lmatrix, lwork, ncoef, ndof, scaling, step, work
+from .families import OK
+from .loops import COMPLEX_STEP, _accept, _add, _coefs, _factors, _record_start, _rescale
+from .stack import _scene, coef_table, matrices, vectors
+
+ACC = ("H_ext_max_abs", "det_max_dev", "symp_max_dev", "symp_max_rel")
+WANT_H, WANT_MAPS = 1, 2
+START = -1
+ENV = ("H_min", "H_max", "vol_min", "vol_max", "det", "symp")
+
+
+@njit(**INLINE)
+def determinant(A, m):
+    """det of A[:m, :m] by LU with partial pivoting (A is overwritten)."""
+    d = 1.0
+    for c in range(m):
+        p = c
+        big = abs(A[c, c])
+        for i in range(c + 1, m):
+            if abs(A[i, c]) > big:
+                big = abs(A[i, c])
+                p = i
+        if big == 0.0:
+            return 0.0
+        if p != c:
+            d = -d
+            for j in range(c, m):
+                A[c, j], A[p, j] = A[p, j], A[c, j]
+        d *= A[c, c]
+        inv = 1.0 / A[c, c]
+        for i in range(c + 1, m):
+            f = A[i, c] * inv
+            for j in range(c + 1, m):
+                A[i, j] -= f * A[c, j]
+    return d
+
+
+@njit(**INLINE)
+def symplecticity(M, m):
+    """(||M^T J M - J||_max, the same divided by the largest sum of |terms| that make up an entry
+    of M^T J M): the absolute defect and a scale-free one (round-off level for a symplectic map
+    whatever the size of M, the method's own defect otherwise)."""
+    n = m // 2
+    worst = 0.0
+    size = 0.0
+    for i in range(m):
+        for j in range(m):
+            v = 0.0
+            s = 0.0
+            for r in range(n):
+                a = M[r, i] * M[r + n, j]
+                b = M[r + n, i] * M[r, j]
+                v += a - b
+                s += abs(a) + abs(b)
+            target = 1.0 if j == i + n else (-1.0 if i == j + n else 0.0)
+            worst = max(worst, abs(v - target))
+            size = max(size, s)
+    return worst, worst / size if size > 0.0 else math.inf
+
+
+@njit(**INLINE)
+def grow(M, e, A, B, state, m):
+    """A <- M A / (its largest entry), the log of that entry added to state[0]; A is kept in the
+    scaled coordinates of exponent state[1] (see diagnostics.MapGrowth). False if not finite."""
+    n = m // 2
+    shift = e - int(state[1])
+    if shift != 0:
+        qf, pf = math.ldexp(1.0, -shift), math.ldexp(1.0, shift)
+        for i in range(n):
+            for j in range(m):
+                A[i, j] *= qf
+                A[n + i, j] *= pf
+        state[1] = e
+    big = 0.0
+    for i in range(m):
+        for j in range(m):
+            s = 0.0
+            for r in range(m):
+                s += M[i, r] * A[r, j]
+            B[i, j] = s
+            big = max(big, abs(s))
+    if not (0.0 < big < np.inf):
+        return False
+    for i in range(m):
+        for j in range(m):
+            A[i, j] = B[i, j] / big
+    state[0] += math.log(big)
+    return True
+
+
+@njit(**INLINE)
+def _energy_after(P, C, end, Ce, t, z):
+    """H of the new state z of a step, in the step's scaled coordinates (H is invariant under the
+    scaling, see scenes.base.SceneKernel), with time t (shifted): from the step's own last
+    coefficient row where the family has one at the step's end, else from a new row."""
+    if end >= 0:
+        return energy(P, C, end, z)
+    coef(P, t, Ce, 0)
+    return energy(P, Ce, 0, z)
+
+
+@njit(**INLINE)
+def _increment_row(X, i, z, old, h, n):
+    """Row i of the volume estimator's matrix: the increment of a member in (q, t, p)."""
+    for r in range(n):
+        X[i, r] = z[r] - old[r]
+        X[i, n + 1 + r] = z[n + r] - old[n + r]
+    X[i, n] = h
+
+
+@njit(**INLINE)
+def _reduce(k, width, t1, M, mapped, want, e, hext, X, volume, acc, env, tb, G, B, gstate, m):
+    """Fold one step's wanted figures into acc, its bin and the growth product (gstate[2] = 0
+    once that product stopped being finite)."""
+    if want & WANT_H:
+        acc[0] = max(acc[0], abs(hext))
+    dev = symp = 0.0
+    if mapped and want & WANT_MAPS:
+        for i in range(m):
+            for j in range(m):
+                B[i, j] = M[i, j]
+        dev = abs(determinant(B, m) - 1.0)
+        symp, rel = symplecticity(M, m)
+        acc[1] = max(acc[1], dev)
+        acc[2] = max(acc[2], symp)
+        acc[3] = max(acc[3], rel)
+    if mapped and G.shape[0] > 0 and gstate[2] == 1.0 and not grow(M, e, G, B, gstate, m):
+        gstate[2] = 0.0
+    if width > 0:
+        b = k // width
+        if k % width == 0:
+            tb[b] = t1
+        env[b, 0] = min(env[b, 0], hext)
+        env[b, 1] = max(env[b, 1], hext)
+        if volume:
+            vol = determinant(X, m + 1)
+            env[b, 2] = min(env[b, 2], vol)
+            env[b, 3] = max(env[b, 3], vol)
+        if mapped:
+            env[b, 4] = max(env[b, 4], dev)
+            env[b, 5] = max(env[b, 5], symp)
+
+
+@njit(**INLINE)
+def _members_run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PTrec, every, want, width, acc, env, tb, G,
+                 gstate):
+    """Member steps (any scene); member 0's tangent map by complex step of its step."""
+    C = coef_table(D, P)
+    Ce = coef_table(D, P)
+    W = work(D, P, 0.0)
+    Wc = work(D, P, 0j)
+    zc = vectors(P, 1, 0j)[0]
+    V = vectors(P, 3, 0.0)
+    z, old, zs = V[0], V[1], V[2]
+    MB = matrices(P, 2, 0.0)
+    M, B = MB[0], MB[1]
+    m = 2 * ndof(P)
+    n = m // 2
+    X = np.empty((m + 1, m + 1))
+    volume = Z.shape[0] >= m + 2
+    none = np.empty((0, 0, m))
+    u = len(D.offsets)
+    can_reuse = u > 1 and D.offsets[0] == 0.0 and D.offsets[u - 1] == 1.0
+    end = u - 1 if D.offsets[u - 1] == 1.0 else -1
+    hnew = 0.0
+    _record_start(t0 + first * h, Z, PT, Trec, Zrec, PTrec, none, m)
+    rec = 1
+    prev = 0
+    up = down = 1.0
+    for k in range(nsteps):
+        g = first + k
+        e, tau = _coefs(P, D.offsets, t0 + g * h, t0 + (g + 1) * h, h, C, can_reuse and k > 0, prev)
+        if e != prev:
+            up, down = _factors(e)
+            prev = e
+        tk = t0 + g * h - tau
+        mapped = every > 0 and k % every == 0
+        if mapped:
+            for r in range(m):
+                zs[r] = Z[0, r]
+            _rescale(zs, n, e, down, up)
+            for j in range(m):
+                for r in range(m):
+                    zc[r] = zs[r]
+                zc[j] += 1j * COMPLEX_STEP
+                status, _ = step(D, P, C, tk, h, zc, PT[0] + 0j, Wc)
+                if status != OK:
+                    return status, k, True
+                for r in range(m):
+                    M[r, j] = zc[r].imag / COMPLEX_STEP
+        recording = (k + 1) % stride == 0 or k + 1 == nsteps
+        t1 = t0 + (g + 1) * h
+        for i in range(Z.shape[0]):
+            for r in range(m):
+                old[r] = Z[i, r]
+                z[r] = old[r]
+            _rescale(z, n, e, down, up)
+            status, dpt = step(D, P, C, tk, h, z, 0.0, W)
+            if i == 0 and want & WANT_H:
+                hnew = _energy_after(P, C, end, Ce, t1 - tau, z)
+            _rescale(z, n, e, up, down)
+            sum_, comp = _add(S, Cc, i, dpt)
+            status = _accept(status, i, z, old, sum_ + comp, Z, PT, rec, recording, Zrec, PTrec, none, m)
+            if status != OK:
+                return status, k, False
+            S[i], Cc[i] = sum_, comp
+            if volume and 1 <= i <= m + 1:
+                _increment_row(X, i - 1, z, old, h, n)
+        hext = hnew + PT[0]
+        _reduce(k, width, t1, M, mapped, want, e, hext, X, volume, acc, env, tb, G, B, gstate, m)
+        if recording:
+            Trec[rec] = t1
+            rec += 1
+    return OK, nsteps, False
+
+
+@njit(**INLINE)
+def _matrix_run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PTrec, every, want, width, acc, env, tb, G,
+                gstate):
+    """A linear scene: one step matrix per step (kernels.linear), applied to every member, and
+    itself member 0's tangent map."""
+    C = coef_table(D, P)
+    Ce = coef_table(D, P)
+    LW = lwork(D, P)
+    MQ = matrices(P, 3, 0.0)
+    M, Q, B = MQ[0], MQ[1], MQ[2]
+    V = vectors(P, 3, 0.0)
+    z, old, zs = V[0], V[1], V[2]
+    m = 2 * ndof(P)
+    n = m // 2
+    X = np.empty((m + 1, m + 1))
+    volume = Z.shape[0] >= m + 2
+    none = np.empty((0, 0, m))
+    u = len(D.offsets)
+    can_reuse = u > 1 and D.offsets[0] == 0.0 and D.offsets[u - 1] == 1.0
+    end = u - 1 if D.offsets[u - 1] == 1.0 else -1
+    hnew = 0.0
+    _record_start(t0 + first * h, Z, PT, Trec, Zrec, PTrec, none, m)
+    rec = 1
+    prev = 0
+    up = down = 1.0
+    for k in range(nsteps):
+        g = first + k
+        e, tau = _coefs(P, D.offsets, t0 + g * h, t0 + (g + 1) * h, h, C, can_reuse and k > 0, prev)
+        if e != prev:
+            up, down = _factors(e)
+            prev = e
+        tk = t0 + g * h - tau
+        s = lmatrix(D, P, C, tk, h, M, Q, LW)
+        mapped = every > 0 and k % every == 0
+        recording = (k + 1) % stride == 0 or k + 1 == nsteps
+        t1 = t0 + (g + 1) * h
+        for i in range(Z.shape[0]):
+            quad = 0.0
+            for r in range(m):
+                old[r] = Z[i, r]
+                zs[r] = old[r]
+            _rescale(zs, n, e, down, up)
+            for r in range(m):
+                acc_ = 0.0
+                qr = 0.0
+                for c in range(m):
+                    acc_ += M[r, c] * zs[c]
+                    qr += Q[r, c] * zs[c]
+                z[r] = acc_
+                quad += zs[r] * qr
+            if i == 0 and want & WANT_H:
+                hnew = _energy_after(P, C, end, Ce, t1 - tau, z)
+            _rescale(z, n, e, up, down)
+            sum_, comp = _add(S, Cc, i, -(0.5 * quad + s))
+            status = _accept(OK, i, z, old, sum_ + comp, Z, PT, rec, recording, Zrec, PTrec, none, m)
+            if status != OK:
+                return status, k, False
+            S[i], Cc[i] = sum_, comp
+            if volume and 1 <= i <= m + 1:
+                _increment_row(X, i - 1, z, old, h, n)
+        hext = hnew + PT[0]
+        _reduce(k, width, t1, M, mapped, want, e, hext, X, volume, acc, env, tb, G, B, gstate, m)
+        if recording:
+            Trec[rec] = t1
+            rec += 1
+    return OK, nsteps, False
+
+
+def with_values(P, row):
+    """A parameter tuple of P's class with its fields from row (scenes whose fields are all floats)."""
+
+
+@overload(with_values, jit_options=_INLINE)
+def _with_values(P, row):
+    cls = P.instance_class
+    count = len(P.types)
+    if not all(t == types.float64 for t in P.types):
+        raise TypingError(f"{cls.__name__} has fields other than floats: its runs cannot be batched")
+    return lambda P, row: cls(*to_fixed_tuple(row, count))
+
+
+@njit(**INLINE)
+def _start(P, Z, Ce, zs, m):
+    """H of member 0 of Z at t = 0, as kernels.loops.energies evaluates it."""
+    e, tau = scaling(P, 0.0)
+    up, down = _factors(e)
+    coef(P, 0.0 - tau, Ce, 0)
+    for r in range(m):
+        zs[r] = Z[0, r]
+    _rescale(zs, m // 2, e, down, up)
+    return energy(P, Ce, 0, zs)
+
+
+def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PTrec, every, want, width, acc, env, tb, G,
+           gstate):
+    """The fused loop survey() picks for the scene: _matrix_run on a linear one, else _members_run."""
+
+
+@overload(_fused, jit_options=_INLINE)
+def _fused_impl(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PTrec, every, want, width, acc, env, tb, G,
+                gstate):
+    run = _matrix_run if _scene(P).linear else _members_run
+
+    def impl(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PTrec, every, want, width, acc, env, tb, G,
+             gstate):
+        return run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PTrec, every, want, width, acc, env, tb,
+                   G, gstate)
+
+    return impl
+
+
+@njit(**JIT)
+def batch(D, P, R, Z0, h, nsteps, every, want, acc, G, gstate, status):
+    """B independent runs of one trajectory, by the loop survey() picks: run b with the scene's
+    parameters R[b] (in the order of its parameter tuple) from the state Z0[b] at t = 0 with
+    p_t = -H, reduced as one survey call reduces (into acc[b], G[b], gstate[b]; no records, no
+    bins). status[b] = (status, steps completed), START where H at the start is not finite.
+    One compiled call for a grid of parameter sets: a sweep pays no Python per point."""
+    D, P, R, Z0, acc, G, gstate, status = borrow((D, P, R, Z0, acc, G, gstate, status))
+    m = 2 * ndof(P)
+    Z = np.empty((1, m))
+    PT, S, Cc = np.empty(1), np.empty(1), np.empty(1)
+    Trec, Zrec, PTrec = np.empty(2), np.empty((2, 1, m)), np.empty((2, 1))
+    env, tb = np.empty((0, len(ENV))), np.empty(0)
+    Ce = np.empty((1, ncoef(P)))
+    zs = np.empty(m)
+    for b in range(R.shape[0]):
+        Pb = with_values(P, R[b])
+        for r in range(m):
+            Z[0, r] = Z0[b, r]
+        H0 = _start(Pb, Z, Ce, zs, m)
+        if not np.isfinite(H0):
+            status[b, 0], status[b, 1] = START, 0
+            continue
+        PT[0] = S[0] = -H0
+        Cc[0] = 0.0
+        st, k, _ = _fused(D, Pb, 0.0, 0, h, Z, PT, S, Cc, nsteps, nsteps, Trec, Zrec, PTrec, every, want, 0, acc[b], env,
+                          tb, G[b], gstate[b])
+        status[b, 0], status[b, 1] = st, k
+
+
+@njit(**JIT)
+def survey(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PTrec, every, want, width, acc, env, tb, G, gstate):
+    """One call of the fused loop for the scene (_fused), its arrays borrowed."""
+    return _fused(*borrow((D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PTrec, every, want, width, acc,
+                           env, tb, G, gstate)))

@@ -1,0 +1,179 @@
+"""The fused driver (cosymp.drive) against the diagnostics computed in NumPy from recorded runs
+(every step recorded, tangent maps formed in a second pass), on every scene x method."""
+import math
+
+import numpy as np
+import pytest
+
+from cosymp import drive as drive_module
+from cosymp import sweep
+from cosymp.diagnostics import (
+    det_deviation,
+    nearby_states,
+    paper_volume_form,
+    symplecticity_defect,
+    tangent_maps,
+)
+from cosymp.drive import Drive
+from cosymp.integrate import Setup, simulate
+from cosymp.methods import METHODS
+from cosymp.scenes import SCENES
+from cosymp.summary import long_chunk, run_summary
+
+PAIRS = [(s, m) for s in SCENES for m in METHODS if METHODS[m].refusal(SCENES[s]) is None and m != "exact"]
+STEPS = 48
+WIDTH = 8
+
+
+def close(a, b, rel, floor=1e-13):
+    """a and b agree to `rel` relative or within `floor` (round-off of quantities near 0)."""
+    return abs(a - b) <= floor + rel * abs(b)
+
+
+def numpy_figures(setup, h, steps, z0=None):
+    tr = simulate(setup, h, steps * h, z0=z0, stride=1, increments=True)
+    M = tangent_maps(tr)
+    return tr, M
+
+
+@pytest.mark.parametrize("scene,method", PAIRS)
+def test_fused_driver_matches_numpy_diagnostics(scene, method):
+    s = Setup.make(scene, method)
+    h = s.scene.h
+    tr, M = numpy_figures(s, h, STEPS)
+    d = Drive(s, h, growth=True)
+    d.run(STEPS)
+    assert d.t == pytest.approx(tr.t[-1], rel=1e-15)
+    scale = np.max(np.abs(tr.z))
+    assert np.max(np.abs(d.Z[0] - tr.z[-1, 0])) <= 1e-12 * scale
+    H = np.abs(tr.H_ext[1:, 0])
+    assert close(d.H_ext_max_abs, np.max(H), 1e-8, 1e-14 * max(1.0, np.max(np.abs(tr.H))))
+    assert close(d.det_max_dev, np.max(det_deviation(M)), 1e-8)
+    assert close(d.symp_max_dev, np.max(symplecticity_defect(M)), 1e-8)
+    assert close(d.symp_max_rel, np.max(symplecticity_defect(M, relative=True)), 1e-8)
+    # ln sigma_max of the product of every step's map, multiplied out in NumPy (no overflow in 48
+    # steps); each map taken back from its step's scaled coordinates: S^-1 M S, S = diag(2^-e, 2^e)
+    n = s.scene.ndof
+    prod = np.eye(2 * n)
+    for t, Mk in zip(tr.t, M):
+        e = s.scene.kernel.scaling(s.P, t)[0]
+        S = np.diag([2.0 ** -e] * n + [2.0 ** e] * n)
+        prod = np.linalg.solve(S, Mk @ S) @ prod
+    assert d.growth.log_norm() == pytest.approx(math.log(np.linalg.norm(prod, 2)), abs=1e-10)
+
+
+@pytest.mark.parametrize("scene,method", [p for p in PAIRS if p[1] in ("midpoint", "rk4", "gauss4", "leapfrog", "boris")])
+def test_envelopes_match_numpy_reductions(scene, method):
+    s = Setup.make(scene, method)
+    h = s.scene.h
+    n = s.scene.ndof
+    Z0 = nearby_states(s.start[0], 1e-4, 2 * n + 1)
+    tr, M = numpy_figures(s, h, STEPS, Z0)
+    bins, Z, _, failure = long_chunk(s, h, STEPS, Z0, None, 0, WIDTH)
+    assert failure == ""
+
+    def reduce(values, op):
+        return op.reduceat(values, np.arange(0, len(values), WIDTH))
+
+    H = tr.H_ext[1:, 0]
+    vol = paper_volume_form(tr)
+    want = {"t": tr.t[1:][::WIDTH], "H_min": reduce(H, np.minimum), "H_max": reduce(H, np.maximum),
+            "vol_min": reduce(vol, np.minimum), "vol_max": reduce(vol, np.maximum),
+            "det": reduce(det_deviation(M), np.maximum), "symp": reduce(symplecticity_defect(M), np.maximum)}
+    assert set(bins) == set(want)
+    np.testing.assert_allclose(bins["t"], want["t"], rtol=1e-15)
+    Hscale = 1e-14 * max(1.0, np.max(np.abs(tr.H)))
+    for key in ("H_min", "H_max"):
+        np.testing.assert_allclose(bins[key], want[key], rtol=1e-8, atol=Hscale)
+    # A determinant of nearly parallel increments cancels heavily: its round-off is bounded by
+    # eps times Hadamard's bound (the product of the rows' norms), not by eps times the value.
+    dZ = tr.increments[1:, 1:2 * n + 2]
+    rows = np.sqrt(np.sum(dZ ** 2, axis=-1) + h * h)
+    hadamard = np.max(np.prod(rows, axis=-1))
+    for key in ("vol_min", "vol_max"):
+        np.testing.assert_allclose(bins[key], want[key], rtol=0, atol=1e-13 * hadamard)
+    for key in ("det", "symp"):
+        np.testing.assert_allclose(bins[key], want[key], rtol=1e-8, atol=1e-13)
+    np.testing.assert_allclose(Z, tr.z[-1], rtol=0, atol=1e-12 * np.max(np.abs(tr.z)))
+
+
+def test_chunks_keep_bins_and_sampled_maps_aligned(monkeypatch):
+    """A run cut into many compiled calls gives the figures of one call: bins and the sampled
+    maps are counted from the run's first step."""
+    s = Setup.make("kapitza", "midpoint")
+    h = s.scene.h
+    Z0 = nearby_states(s.start[0], 1e-4, 3)
+    one = Drive(s, h, z0=Z0, width=6, every=3)
+    whole = one.run(120)
+    monkeypatch.setattr(drive_module, "CHUNK", 7)
+    many = Drive(s, h, z0=Z0, width=6, every=3)
+    cut = many.run(120)
+    assert many.unit == 6
+    for key in whole:
+        np.testing.assert_array_equal(cut[key], whole[key])
+    np.testing.assert_array_equal(many.acc, one.acc)
+    np.testing.assert_array_equal(many.Z, one.Z)
+
+
+def test_sampled_maps_are_a_subset_of_every_map():
+    s = Setup.make("kapitza", "rk4")
+    h = s.scene.h
+    M = numpy_figures(s, h, 60)[1]
+    d = Drive(s, h, every=4)
+    d.run(60)
+    assert d.det_max_dev == pytest.approx(np.max(det_deviation(M[::4])), rel=1e-8)
+    assert d.det_max_dev <= np.max(det_deviation(M))
+
+
+def test_failure_keeps_the_data_before_it():
+    """The damped scene's RK4 at a step past its stability overflows: the driver stops there,
+    says so, and keeps the bins and maxima of the steps before."""
+    s = Setup.make("damped", "rk4", {"gamma": 0.0})
+    h = 3.0
+    bins, Z, PT, failure = long_chunk(s, h, 4000, nearby_states(s.start[0], 1e-4, 3), None, 0, 10)
+    assert failure.startswith("overflow in step")
+    assert 0 < len(bins["t"]) < 400
+    assert np.all(np.isfinite(bins["H_max"][:10]))  # H itself overflows before the state does
+    assert np.all(np.isfinite(Z)) and np.all(np.isfinite(PT))
+
+
+def test_run_summary_reports_the_fused_figures():
+    s = Setup.make("damped", "midpoint")
+    out = run_summary(s, 0.1, 5.0, with_error=False)
+    tr = numpy_figures(s, 0.1, 50)[0]
+    assert out["steps"] == 50
+    assert out["H_ext_max_abs"] == pytest.approx(np.max(np.abs(tr.H_ext)), rel=1e-8)
+    assert out["symp_max_rel"] <= 1e-15
+    assert out["H_ext_final"] == pytest.approx(tr.H_ext[-1, 0], rel=1e-8, abs=1e-15)
+
+
+@pytest.mark.parametrize("scene,method,names", [("modulated", "midpoint", ("eps", "alpha")),
+                                                ("kapitza", "gauss4", ("a", "q0")),
+                                                ("damped", "rk4", ("gamma", "p0"))])
+def test_batched_runs_match_runs_one_by_one(scene, method, names):
+    """A grid's points in one compiled call (kernels.survey.batch) give what each point's own run
+    gives (sweep.figures: a Drive per point), with the scene's parameters and initial state from
+    the batch's rows."""
+    axes = [f"{names[0]}=0.1:0.6:3", f"{names[1]}=0.5:1.5:3"]
+    p = sweep.plan(scene, method, axes, ["H_ext_max_abs", "det_max_dev", "growth"], T=20.0)
+    assert sweep._batched(p)
+    done, cols, statuses, _ = sweep.evaluate(p, range(p.size))
+    assert done == list(range(p.size)) and statuses == ["ok"] * p.size
+    for i in range(p.size):
+        setup, h, T = p.run_of(p.point(i))
+        one, status = sweep.figures(setup, h, T, p.measures)
+        assert status == "ok"
+        for k in p.measures:
+            assert cols[k][i] == pytest.approx(one[k], rel=1e-12, abs=1e-15), (i, k)
+
+
+def test_a_failed_point_of_a_batch_gets_its_own_message():
+    """Explicit Euler on the modulated oscillator grows like exp(n h^2 / 2): at h = 0.5 to T = 1e5
+    it overflows wherever it runs; the batch's failed points are run alone for their message."""
+    p = sweep.plan("modulated", "euler", ["eps=0:0.4:3"], ["H_ext_max_abs", "growth"], h=0.5, T=1e5)
+    _, cols, statuses, _ = sweep.evaluate(p, range(p.size))
+    for i in range(p.size):
+        setup, h, T = p.run_of(p.point(i))
+        assert statuses[i] == sweep.figures(setup, h, T, p.measures)[1]
+        assert statuses[i].startswith("overflow in step")
+    assert np.all(np.isnan(cols["growth"]))
