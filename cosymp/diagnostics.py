@@ -76,9 +76,9 @@ class MapGrowth:
     """The largest finite-time growth exponent of a method's map along a run:
     ln(sigma_max(M_(K-1) ... M_0)) / t over the one-step tangent maps of every step (the largest
     singular value of the run's linearised map: a finite-time Lyapunov exponent). The fused
-    driver (cosymp.drive) multiplies the maps into A as it steps, renormalising after each
-    step, so any horizon fits in floating point; scaled steps (the damped scene) are undone
-    exactly. state: (log of the scale taken out, the scaling exponent A is kept in, 1.0 while
+    driver (cosymp.drive) multiplies the maps into A as it steps, taking out an exact power of
+    two whenever A's entries leave [2^-64, 2^64], so any horizon fits in floating point; scaled
+    steps (the damped scene) are undone exactly. state: (log of the scale taken out, the scaling exponent A is kept in, 1.0 while
     every map was finite and non-singular)."""
 
     def __init__(self, m):

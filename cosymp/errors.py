@@ -20,6 +20,8 @@ def quoted(value, limit=QUOTE_LIMIT):
 
 def as_number(value, label):
     """A finite float from a number (Python's or NumPy's, not bool), or InputError naming label."""
+    if type(value) is float and math.isfinite(value):  # the common case, without the ABC checks
+        return value
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise InputError(f"{label} = {quoted(value)} is not a number: pass a finite {label}")
     try:

@@ -187,3 +187,33 @@ def test_the_colour_bar_uses_the_apps_compact_ticks_and_cells_have_no_gaps():
         assert bar.formatter.code == code
         glyph = plot.fig.renderers[0].glyph
         assert glyph.line_color == glyph.fill_color and glyph.line_color.transform is plot.mapper
+
+
+@pytest.mark.slow
+def test_a_server_configured_with_a_dask_scheduler_computes_its_maps_there(monkeypatch):
+    """COSYMP_DASK_SCHEDULER names a running cluster: the map is computed there (its result says
+    where) and its figures are bit-identical to the in-process map's."""
+    distributed = pytest.importorskip("distributed")
+    import logging
+
+
+    cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0",
+                                       silence_logs=logging.ERROR)
+    try:
+        results = {}
+        for where in ("here", cluster.scheduler_address):
+            if where == "here":
+                monkeypatch.delenv(maps.SCHEDULER_ENV, raising=False)
+            else:
+                monkeypatch.setenv(maps.SCHEDULER_ENV, where)
+            m = StabilityMap(Study(scene="modulated"), nx=6, ny=4)
+            m.start()
+            assert m.status.startswith("done"), m.status
+            results[where] = m.result
+    finally:
+        cluster.close()
+    here, there = results["here"], results[cluster.scheduler_address]
+    assert "this process" in here.where and cluster.scheduler_address in there.where
+    assert there.status.tolist() == here.status.tolist()
+    for k in here.plan.measures:
+        assert np.array_equal(here.values[k], there.values[k], equal_nan=True), k

@@ -1,7 +1,9 @@
 """Stability map: one measure of the sidebar's method over two varied quantities (scene parameters,
-h, T or θ), computed by cosymp.sweep in the background with progress and Cancel, drawn as a heat
-map (failed runs black); a click on a cell opens that run in Orbits."""
+h, T or θ), computed by cosymp.sweep in the background with progress and Cancel (on a Dask cluster
+when COSYMP_DASK_SCHEDULER names its scheduler), drawn as a heat map (failed runs black); a click
+on a cell opens that run in Orbits."""
 import html
+import os
 
 import numpy as np
 import panel as pn
@@ -28,6 +30,9 @@ from .base import Feature, FeatureView
 from .workprecision import run_controls
 
 MAP_MAX_SIDE = 100
+# The address of a running Dask scheduler (tcp://host:8786): maps are computed on that cluster,
+# whose workers need cosymp installed; unset, in this process on a thread pool.
+SCHEDULER_ENV = "COSYMP_DASK_SCHEDULER"
 MAP_MAX_STEPS = 200_000_000
 # First axes per scene: (x name, start, stop, log), (y name, start, stop, log).
 MAP_AXES = {
@@ -144,7 +149,7 @@ class StabilityMap(Job):
         self.status = f"running: {self._describe(plan)}"
 
     def _compute(self, plan, run):
-        return sweep.run(plan, progress=run.report)
+        return sweep.run(plan, scheduler=os.environ.get(SCHEDULER_ENV) or None, progress=run.report)
 
     def _finish(self, plan, result):
         self.job = plan

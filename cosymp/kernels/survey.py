@@ -39,6 +39,8 @@ from .stack import _scene, coef_table, matrices, vectors
 
 ACC = ("H_ext_max_abs", "det_max_dev", "symp_max_dev", "symp_max_rel")
 WANT_H, WANT_MAPS = 1, 2
+RANGE = 64
+LN2 = math.log(2.0)
 START = -1
 ENV = ("H_min", "H_max", "vol_min", "vol_max", "det", "symp")
 
@@ -94,8 +96,9 @@ def symplecticity(M, m):
 
 @njit(**INLINE)
 def grow(M, e, A, B, state, m):
-    """A <- M A / (its largest entry), the log of that entry added to state[0]; A is kept in the
-    scaled coordinates of exponent state[1] (see diagnostics.MapGrowth). False if not finite."""
+    """A <- M A, scaled by an exact power of two 2^-x once its largest entry leaves [2^-RANGE,
+    2^RANGE] (x ln 2 added to state[0]: no logarithm per step); A is kept in the scaled
+    coordinates of exponent state[1] (see diagnostics.MapGrowth). False if not finite."""
     n = m // 2
     shift = e - int(state[1])
     if shift != 0:
@@ -115,10 +118,14 @@ def grow(M, e, A, B, state, m):
             big = max(big, abs(s))
     if not (0.0 < big < np.inf):
         return False
+    f = 1.0
+    if not (2.0 ** -RANGE < big < 2.0 ** RANGE):
+        x = math.frexp(big)[1]
+        f = math.ldexp(1.0, -x)
+        state[0] += x * LN2
     for i in range(m):
         for j in range(m):
-            A[i, j] = B[i, j] / big
-    state[0] += math.log(big)
+            A[i, j] = B[i, j] * f
     return True
 
 
