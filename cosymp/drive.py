@@ -101,9 +101,11 @@ class Drive:
         env[:, 4:] = 0.0 if self.want & WANT_MAPS else math.nan
         tb = np.empty(bins)
         Trec, Zrec, PTrec = np.empty(2), np.empty((2, N, m)), np.empty((2, N))
+        ends = (self.t0 + self.done * self.h, self.t0 + (self.done + steps) * self.h)
+        scaled = s.scene.needs_scaling(s.P, max(abs(ends[0]), abs(ends[1])))
         status, k, in_tangent = survey(s.data, s.P, self.t0, self.done, self.h, self.Z, self.PT, self._sum,
                                              self._comp, steps, steps, Trec, Zrec, PTrec, self.every, self.want, self.width,
-                                             self.acc, env, tb, self._G, self._gstate)
+                                             self.acc, env, tb, self._G, self._gstate, scaled)
         self.done += k
         self.t = self.t0 + self.done * self.h
         if status != OK:
@@ -164,8 +166,10 @@ def batch_runs(setup, h, steps, R, Z0, with_det=True, growth=False, energy=True)
     G = np.tile(np.eye(m), (B, 1, 1)) if growth else np.empty((B, 0, 0))
     gstate = np.tile([0.0, 0.0, 1.0], (B, 1))
     status = np.zeros((B, 2), dtype=np.int64)
-    batch(setup.data, setup.P, np.ascontiguousarray(R, dtype=float), np.ascontiguousarray(Z0, dtype=float), float(h),
-          int(steps), every, want, acc, G, gstate, status)
+    R = np.ascontiguousarray(R, dtype=float)
+    scaled = any(setup.scene.needs_scaling(setup.scene.Params(*row), steps * h) for row in R)
+    batch(setup.data, setup.P, R, np.ascontiguousarray(Z0, dtype=float), float(h), int(steps), every, want, acc, G,
+          gstate, status, scaled)
     if not want & WANT_H:
         acc[:, 0] = math.nan
     if not want & WANT_MAPS:

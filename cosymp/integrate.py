@@ -188,11 +188,13 @@ def simulate(setup, h, T, z0=None, stride=None, increments=False, t0=0.0, pt0=No
     dZrec = np.empty((K if increments else 0, N, m))
     kernel = propagate(setup, N)
     key = (kernel, type(setup.data), type(setup.P))
+    scaled = setup.scene.needs_scaling(setup.P, max(abs(t0), abs(t0 + steps * h)))
     if key not in _LOADED:  # load or compile it untimed (the arrays' types never change)
-        kernel(setup.data, setup.P, float(t0), float(h), Z, PT, 0, stride, Trec, Zrec, PTrec, dZrec)
+        kernel(setup.data, setup.P, float(t0), float(h), Z, PT, 0, stride, Trec, Zrec, PTrec, dZrec, scaled)
         _LOADED.add(key)
     start = time.perf_counter()
-    status, done = kernel(setup.data, setup.P, float(t0), float(h), Z, PT, steps, stride, Trec, Zrec, PTrec, dZrec)
+    status, done = kernel(setup.data, setup.P, float(t0), float(h), Z, PT, steps, stride, Trec, Zrec, PTrec, dZrec,
+                          scaled)
     wall = time.perf_counter() - start
     kept = records(done, stride) if status == OK else done // stride + 1
     traj = _trajectory(setup, h, stride, Trec[:kept], Zrec[:kept], PTrec[:kept],

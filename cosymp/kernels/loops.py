@@ -18,11 +18,12 @@ COMPLEX_STEP = 1e-50
 
 
 @njit(**INLINE)
-def _coefs(P, offsets, tk, tk1, h, C, reuse, prev):
+def _coefs(P, offsets, tk, tk1, h, C, reuse, prev, scaled=True):
     """Time coefficients at the offsets of the step from tk to tk1, read at the scene's shifted
-    time; returns the step's scaling (e, tau). With `reuse`, the end of the last step (scaling
+    time; returns the step's scaling (e, tau), (0, 0) without `scaled` (a run whose range needs
+    none: scenes.base.Scene.needs_scaling). With `reuse`, the end of the last step (scaling
     exponent `prev`) is the start of this one when the scaling did not change."""
-    e, tau = scaling(P, tk)
+    e, tau = scaling(P, tk) if scaled else (0, 0.0)
     u = len(offsets)
     for j in range(u):
         if j == 0 and reuse and e == prev:
@@ -95,13 +96,14 @@ def _add(S, Cc, i, d):
 
 
 @njit(**JIT)
-def propagate_matrix(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec):
+def propagate_matrix(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, scaled):
     """Advance the N members of (Z, PT) of a linear scene by nsteps steps of h from t0.
 
     One step matrix (M, Q, s) per step (kernels.linear), applied to every member:
     z <- M z, p_t <- p_t - (z.Q z / 2 + s). Records every stride-th state (index j is step
     j*stride, index 0 the start) and the final state (one more record when stride does not divide
-    nsteps) and, when dZrec is non-empty, the increment z_k - z_(k-1) of the step before each record. Returns (status, k): k steps completed; on failure step
+    nsteps) and, when dZrec is non-empty, the increment z_k - z_(k-1) of the step before each record;
+    `scaled`: whether the run's range needs the scene's scaled steps. Returns (status, k): k steps completed; on failure step
     k -> k+1 failed and the records hold every recorded state before it.
     """
     D, P, Z, PT, Trec, Zrec, PTrec, dZrec = borrow((D, P, Z, PT, Trec, Zrec, PTrec, dZrec))
@@ -120,7 +122,7 @@ def propagate_matrix(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZre
     prev = 0
     up = down = 1.0
     for k in range(nsteps):
-        e, tau = _coefs(P, D.offsets, t0 + k * h, t0 + (k + 1) * h, h, C, can_reuse and k > 0, prev)
+        e, tau = _coefs(P, D.offsets, t0 + k * h, t0 + (k + 1) * h, h, C, can_reuse and k > 0, prev, scaled)
         if e != prev:
             up, down = _factors(e)
             prev = e
@@ -154,7 +156,7 @@ def propagate_matrix(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZre
 
 
 @njit(**JIT)
-def propagate_members(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec):
+def propagate_members(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, scaled):
     """As propagate_matrix, for any scene: each member takes the family's step (Newton where
     the method is implicit). p_t is summed with compensation in both (`_add`)."""
     D, P, Z, PT, Trec, Zrec, PTrec, dZrec = borrow((D, P, Z, PT, Trec, Zrec, PTrec, dZrec))
@@ -171,7 +173,7 @@ def propagate_members(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZr
     prev = 0
     up = down = 1.0
     for k in range(nsteps):
-        e, tau = _coefs(P, D.offsets, t0 + k * h, t0 + (k + 1) * h, h, C, can_reuse and k > 0, prev)
+        e, tau = _coefs(P, D.offsets, t0 + k * h, t0 + (k + 1) * h, h, C, can_reuse and k > 0, prev, scaled)
         if e != prev:
             up, down = _factors(e)
             prev = e

@@ -14,7 +14,8 @@ are numbered from `first`, at times t0 + (first + k) h, and S, Cc: p_t's compens
 compensation, carried from call to call, so that a run cut into calls takes the same steps as
 one call): every: form member 0's tangent map at the steps k with k % every == 0 (0:
 never); want: which figures to reduce (WANT_H: H + p_t; WANT_MAPS: det and symplecticity of the
-maps), the growth product being kept wherever G is given;
+maps), the growth product being kept wherever G is given; scaled: whether the run's range needs
+the scene's scaled steps (scenes.base.Scene.needs_scaling);
 acc: running maxima (ACC_*), updated in place; env: (bins, len(ENV)) per-bin reductions of this
 call (bin b holds steps b*width .. (b+1)*width - 1; rows preset by the caller), tb (bins,) the
 time after each bin's first step; G: the growth product (m x m, or 0 x 0 for none) and gstate
@@ -184,7 +185,7 @@ def _reduce(k, width, t1, M, mapped, want, e, hext, X, volume, acc, env, tb, G, 
 
 @njit(**INLINE)
 def _members_run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PTrec, every, want, width, acc, env, tb, G,
-                 gstate):
+                 gstate, scaled):
     """Member steps (any scene); member 0's tangent map by complex step of its step."""
     C = coef_table(D, P)
     Ce = coef_table(D, P)
@@ -210,7 +211,7 @@ def _members_run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, P
     up = down = 1.0
     for k in range(nsteps):
         g = first + k
-        e, tau = _coefs(P, D.offsets, t0 + g * h, t0 + (g + 1) * h, h, C, can_reuse and k > 0, prev)
+        e, tau = _coefs(P, D.offsets, t0 + g * h, t0 + (g + 1) * h, h, C, can_reuse and k > 0, prev, scaled)
         if e != prev:
             up, down = _factors(e)
             prev = e
@@ -257,7 +258,7 @@ def _members_run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, P
 
 @njit(**INLINE)
 def _matrix_run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PTrec, every, want, width, acc, env, tb, G,
-                gstate):
+                gstate, scaled):
     """A linear scene: one step matrix per step (kernels.linear), applied to every member, and
     itself member 0's tangent map."""
     C = coef_table(D, P)
@@ -282,7 +283,7 @@ def _matrix_run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PT
     up = down = 1.0
     for k in range(nsteps):
         g = first + k
-        e, tau = _coefs(P, D.offsets, t0 + g * h, t0 + (g + 1) * h, h, C, can_reuse and k > 0, prev)
+        e, tau = _coefs(P, D.offsets, t0 + g * h, t0 + (g + 1) * h, h, C, can_reuse and k > 0, prev, scaled)
         if e != prev:
             up, down = _factors(e)
             prev = e
@@ -349,25 +350,25 @@ def _start(P, Z, Ce, zs, m):
 
 
 def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PTrec, every, want, width, acc, env, tb, G,
-           gstate):
+           gstate, scaled):
     """The fused loop survey() picks for the scene: _matrix_run on a linear one, else _members_run."""
 
 
 @overload(_fused, jit_options=_INLINE)
 def _fused_impl(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PTrec, every, want, width, acc, env, tb, G,
-                gstate):
+                gstate, scaled):
     run = _matrix_run if _scene(P).linear else _members_run
 
     def impl(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PTrec, every, want, width, acc, env, tb, G,
-             gstate):
+             gstate, scaled):
         return run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PTrec, every, want, width, acc, env, tb,
-                   G, gstate)
+                   G, gstate, scaled)
 
     return impl
 
 
 @njit(**JIT)
-def batch(D, P, R, Z0, h, nsteps, every, want, acc, G, gstate, status):
+def batch(D, P, R, Z0, h, nsteps, every, want, acc, G, gstate, status, scaled):
     """B independent runs of one trajectory, by the loop survey() picks: run b with the scene's
     parameters R[b] (in the order of its parameter tuple) from the state Z0[b] at t = 0 with
     p_t = -H, reduced as one survey call reduces (into acc[b], G[b], gstate[b]; no records, no
@@ -392,12 +393,13 @@ def batch(D, P, R, Z0, h, nsteps, every, want, acc, G, gstate, status):
         PT[0] = S[0] = -H0
         Cc[0] = 0.0
         st, k, _ = _fused(D, Pb, 0.0, 0, h, Z, PT, S, Cc, nsteps, nsteps, Trec, Zrec, PTrec, every, want, 0, acc[b], env,
-                          tb, G[b], gstate[b])
+                          tb, G[b], gstate[b], scaled)
         status[b, 0], status[b, 1] = st, k
 
 
 @njit(**JIT)
-def survey(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PTrec, every, want, width, acc, env, tb, G, gstate):
+def survey(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PTrec, every, want, width, acc, env, tb, G, gstate,
+           scaled):
     """One call of the fused loop for the scene (_fused), its arrays borrowed."""
     return _fused(*borrow((D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PTrec, every, want, width, acc,
-                           env, tb, G, gstate)))
+                           env, tb, G, gstate, scaled)))

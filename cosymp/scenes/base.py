@@ -61,6 +61,10 @@ class SceneKernel:
     method takes the same step up to rounding; only values that would overflow (coefficients e^{gamma t} of the
     damped scene) stay finite while the state does.
 
+    scaled_beyond(P) (Python) gives the |t| up to which a step needs no scaling (the coefficients
+    and the state stay far inside floating-point range): a run whose range stays below it takes
+    plain steps (Scene.needs_scaling), which cost less. None: never scaled.
+
     A separable scene, H = T(p, t) + V(q, t), also gives the exact flows the splitting methods
     compose, each returning its p_t increment: kick(P, C, j, tau, z), the flow of V for a time tau
     at the time of row j (p moves), and drift(P, t0, tau, z), the flow of T + p_t from t0 to
@@ -82,6 +86,7 @@ class SceneKernel:
     scaling: Callable = unscaled
     kick: Callable = None
     drift: Callable = None
+    scaled_beyond: Callable = None
 
 
 @dataclass(frozen=True)
@@ -121,6 +126,11 @@ class Scene:
     @property
     def separable(self):
         return self.kernel.kick is not None
+
+    def needs_scaling(self, P, t_max):
+        """Whether a run reaching |t| = t_max needs the scaled steps (decided per run, before it starts)."""
+        limit = self.kernel.scaled_beyond
+        return limit is not None and t_max > limit(P)
 
     def values(self, overrides=None):
         """Defaults updated by overrides, each checked; unknown names are refused."""

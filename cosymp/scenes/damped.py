@@ -11,6 +11,7 @@ from .base import Param, Scene, SceneKernel
 
 DampedParams = namedtuple("DampedParams", "m w0 gamma")
 LN2 = math.log(2.0)
+PLAIN_RANGE = 200.0
 
 
 @njit(**INLINE)
@@ -34,6 +35,12 @@ def scaling(P, t):
         return 0, 0.0
     e = int(np.rint(P.gamma * t * (0.5 / LN2)))
     return e, e * (2.0 * LN2) / P.gamma
+
+
+def scaled_beyond(P):
+    """Up to |gamma t| = PLAIN_RANGE (e^(+-200) and the state's e^(+-100) are far inside
+    floating-point range) the steps need no scaling."""
+    return math.inf if P.gamma == 0.0 else PLAIN_RANGE / abs(P.gamma)
 
 
 @njit(**INLINE)
@@ -94,7 +101,8 @@ SCENE = Scene(
     ),
     kernel=SceneKernel(ndof=1, ncoef=quadratic.ncoef(1), linear=True, coef=coef,
                        energy=quadratic.energy, grad=quadratic.grad, hess=quadratic.hess,
-                       dhdt=quadratic.dhdt, flow=flow, scaling=scaling, kick=quadratic.kick, drift=drift),
+                       dhdt=quadratic.dhdt, flow=flow, scaling=scaling, kick=quadratic.kick, drift=drift,
+                       scaled_beyond=scaled_beyond),
     Params=DampedParams,
     h=0.1,
     T=50.0,
