@@ -16,9 +16,10 @@ from .diagnostics import MapGrowth, log_norms
 from .errors import RunError
 from .integrate import _exact_overflows, check_step, failure_message, initial_states, start_pt
 from .kernels.families import OK
-from .kernels.survey import ACC, ENV, WANT_H, WANT_MAPS, batch, survey
+from .kernels.survey import ACC, ENV, WANT_H, WANT_MAPS, survey
 
 CHUNK = 1 << 18
+NO_ROWS = np.empty((0, 0))  # survey's R for a run with the setup's own parameters
 DIAG_MAPS = 1 << 16
 
 
@@ -103,9 +104,11 @@ class Drive:
         Trec, Zrec, PTrec = np.empty(2), np.empty((2, N, m)), np.empty((2, N))
         ends = (self.t0 + self.done * self.h, self.t0 + (self.done + steps) * self.h)
         scaled = s.scene.needs_scaling(s.P, max(abs(ends[0]), abs(ends[1])))
-        status, k, in_tangent = survey(s.data, s.P, self.t0, self.done, self.h, self.Z, self.PT, self._sum,
-                                             self._comp, steps, steps, Trec, Zrec, PTrec, self.every, self.want, self.width,
-                                             self.acc, env, tb, self._G, self._gstate, scaled)
+        out = np.zeros((1, 3), dtype=np.int64)
+        survey(s.data, s.P, NO_ROWS, self.t0, self.done, self.h, self.Z[None], self.PT[None], self._sum[None],
+               self._comp[None], steps, steps, Trec, Zrec, PTrec, self.every, self.want, self.width, self.acc[None], env,
+               tb, self._G[None], self._gstate[None], out, scaled, False)
+        status, k, in_tangent = out[0]
         self.done += k
         self.t = self.t0 + self.done * self.h
         if status != OK:
@@ -147,14 +150,14 @@ def concat(parts):
 
 
 def batchable(setup):
-    """Whether runs of the setup's scene can be batched over parameter sets (kernels.survey.batch
+    """Whether runs of the setup's scene can be batched over parameter sets (kernels.survey
     builds each set from a row of floats)."""
     return all(isinstance(v, float) for v in setup.P)
 
 
 def batch_runs(setup, h, steps, R, Z0, with_det=True, growth=False, energy=True):
     """Runs of setup's method, one per row of R (the scene's parameter tuples) from Z0's rows, in
-    one compiled call (kernels.survey.batch), each reduced as scan() reduces one run: returns
+    one compiled call (kernels.survey), each reduced as scan() reduces one run: returns
     {ACC name: (B,) array (NaN where not asked for), "growth": ln sigma_max of each product or
     None, "failed": (B,) bool}. A failed run's figures are not meaningful: run it alone for its
     message."""
@@ -165,11 +168,14 @@ def batch_runs(setup, h, steps, R, Z0, with_det=True, growth=False, energy=True)
     acc = np.zeros((B, len(ACC)))
     G = np.tile(np.eye(m), (B, 1, 1)) if growth else np.empty((B, 0, 0))
     gstate = np.tile([0.0, 0.0, 1.0], (B, 1))
-    status = np.zeros((B, 2), dtype=np.int64)
+    status = np.zeros((B, 3), dtype=np.int64)
     R = np.ascontiguousarray(R, dtype=float)
     scaled = any(setup.scene.needs_scaling(setup.scene.Params(*row), steps * h) for row in R)
-    batch(setup.data, setup.P, R, np.ascontiguousarray(Z0, dtype=float), float(h), int(steps), every, want, acc, G,
-          gstate, status, scaled)
+    Z = np.array(Z0, dtype=float).reshape(B, 1, m)
+    PT, S, Cc = np.empty((B, 1)), np.empty((B, 1)), np.empty((B, 1))
+    Trec, Zrec, PTrec = np.empty(2), np.empty((2, 1, m)), np.empty((2, 1))
+    survey(setup.data, setup.P, R, 0.0, 0, float(h), Z, PT, S, Cc, int(steps), int(steps), Trec, Zrec, PTrec, every, want,
+           0, acc, np.empty((0, len(ENV))), np.empty(0), G, gstate, status, scaled, True)
     if not want & WANT_H:
         acc[:, 0] = math.nan
     if not want & WANT_MAPS:

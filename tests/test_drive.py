@@ -151,7 +151,7 @@ def test_run_summary_reports_the_fused_figures():
                                                 ("kapitza", "gauss4", ("a", "q0")),
                                                 ("damped", "rk4", ("gamma", "p0"))])
 def test_batched_runs_match_runs_one_by_one(scene, method, names):
-    """A grid's points in one compiled call (kernels.survey.batch) give what each point's own run
+    """A grid's points in one compiled call (kernels.survey over parameter sets) give what each point's own run
     gives (sweep.figures: a Drive per point), with the scene's parameters and initial state from
     the batch's rows."""
     axes = [f"{names[0]}=0.1:0.6:3", f"{names[1]}=0.5:1.5:3"]

@@ -28,7 +28,6 @@ import math
 import numpy as np
 from numba import njit
 from numba.core import types
-from numba.core.errors import TypingError
 from numba.extending import overload
 from numba.np.unsafe.ndarray import to_fixed_tuple
 
@@ -325,7 +324,8 @@ def _matrix_run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PT
 
 
 def with_values(P, row):
-    """A parameter tuple of P's class with its fields from row (scenes whose fields are all floats)."""
+    """A parameter tuple of P's class with its fields from row (scenes whose fields are all floats;
+    P itself for the others)."""
 
 
 @overload(with_values, jit_options=_INLINE)
@@ -333,16 +333,16 @@ def _with_values(P, row):
     cls = P.instance_class
     count = len(P.types)
     if not all(t == types.float64 for t in P.types):
-        raise TypingError(f"{cls.__name__} has fields other than floats: its runs cannot be batched")
+        return lambda P, row: P  # not batched (drive.batchable): its runs never pass rows
     return lambda P, row: cls(*to_fixed_tuple(row, count))
 
 
 @njit(**INLINE)
-def _start(P, Z, Ce, zs, m):
-    """H of member 0 of Z at t = 0, as kernels.loops.energies evaluates it."""
-    e, tau = scaling(P, 0.0)
+def _start(P, t, Z, Ce, zs, m):
+    """H of member 0 of Z at t, as kernels.loops.energies evaluates it."""
+    e, tau = scaling(P, t)
     up, down = _factors(e)
-    coef(P, 0.0 - tau, Ce, 0)
+    coef(P, t - tau, Ce, 0)
     for r in range(m):
         zs[r] = Z[0, r]
     _rescale(zs, m // 2, e, down, up)
@@ -351,7 +351,7 @@ def _start(P, Z, Ce, zs, m):
 
 def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PTrec, every, want, width, acc, env, tb, G,
            gstate, scaled):
-    """The fused loop survey() picks for the scene: _matrix_run on a linear one, else _members_run."""
+    """The fused loop for the scene: _matrix_run on a linear one, else _members_run."""
 
 
 @overload(_fused, jit_options=_INLINE)
@@ -368,38 +368,31 @@ def _fused_impl(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PT
 
 
 @njit(**JIT)
-def batch(D, P, R, Z0, h, nsteps, every, want, acc, G, gstate, status, scaled):
-    """B independent runs of one trajectory, by the loop survey() picks: run b with the scene's
-    parameters R[b] (in the order of its parameter tuple) from the state Z0[b] at t = 0 with
-    p_t = -H, reduced as one survey call reduces (into acc[b], G[b], gstate[b]; no records, no
-    bins). status[b] = (status, steps completed), START where H at the start is not finite.
-    One compiled call for a grid of parameter sets: a sweep pays no Python per point."""
-    D, P, R, Z0, acc, G, gstate, status = borrow((D, P, R, Z0, acc, G, gstate, status))
+def survey(D, P, R, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PTrec, every, want, width, acc, env, tb, G,
+           gstate, status, scaled, start):
+    """B = len(Z) runs of the fused loop for the scene (_fused) in one call, its arrays borrowed.
+
+    Run b advances the members Z[b] (p_t PT[b], its compensated sum S[b] and compensation Cc[b])
+    with the scene's parameters P, or R[b] where R has rows (a batch over parameter sets: one
+    compiled call for a sweep's grid, no Python per point; scenes whose parameters are all
+    floats), and reduces into acc[b], G[b], gstate[b]; records and bins (Trec, Zrec, PTrec, env,
+    tb) are run 0's (a batch asks for none). With `start`, each run starts from its state at t0
+    with p_t = -H (START where H is not finite there). status[b] = (status, steps completed, 1
+    if the failure came from the tangent map's complex step)."""
+    D, P, R, Z, PT, S, Cc, Trec, Zrec, PTrec, acc, env, tb, G, gstate, status = borrow(
+        (D, P, R, Z, PT, S, Cc, Trec, Zrec, PTrec, acc, env, tb, G, gstate, status))
     m = 2 * ndof(P)
-    Z = np.empty((1, m))
-    PT, S, Cc = np.empty(1), np.empty(1), np.empty(1)
-    Trec, Zrec, PTrec = np.empty(2), np.empty((2, 1, m)), np.empty((2, 1))
-    env, tb = np.empty((0, len(ENV))), np.empty(0)
     Ce = np.empty((1, ncoef(P)))
     zs = np.empty(m)
-    for b in range(R.shape[0]):
-        Pb = with_values(P, R[b])
-        for r in range(m):
-            Z[0, r] = Z0[b, r]
-        H0 = _start(Pb, Z, Ce, zs, m)
-        if not np.isfinite(H0):
-            status[b, 0], status[b, 1] = START, 0
-            continue
-        PT[0] = S[0] = -H0
-        Cc[0] = 0.0
-        st, k, _ = _fused(D, Pb, 0.0, 0, h, Z, PT, S, Cc, nsteps, nsteps, Trec, Zrec, PTrec, every, want, 0, acc[b], env,
-                          tb, G[b], gstate[b], scaled)
-        status[b, 0], status[b, 1] = st, k
-
-
-@njit(**JIT)
-def survey(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PTrec, every, want, width, acc, env, tb, G, gstate,
-           scaled):
-    """One call of the fused loop for the scene (_fused), its arrays borrowed."""
-    return _fused(*borrow((D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PTrec, every, want, width, acc,
-                           env, tb, G, gstate, scaled)))
+    for b in range(Z.shape[0]):
+        Pb = with_values(P, R[b]) if R.shape[0] > 0 else P
+        if start:
+            H0 = _start(Pb, t0 + first * h, Z[b], Ce, zs, m)
+            if not np.isfinite(H0):
+                status[b, 0], status[b, 1], status[b, 2] = START, 0, 0
+                continue
+            PT[b, 0] = S[b, 0] = -H0
+            Cc[b, 0] = 0.0
+        st, k, tangent_failed = _fused(D, Pb, t0, first, h, Z[b], PT[b], S[b], Cc[b], nsteps, stride, Trec, Zrec, PTrec,
+                                       every, want, width, acc[b], env, tb, G[b], gstate[b], scaled)
+        status[b, 0], status[b, 1], status[b, 2] = st, k, tangent_failed
