@@ -639,7 +639,7 @@ def test_a_long_run_redraws_at_most_once_per_interval_and_ends_with_everything(m
     monkeypatch.setattr(longrun, "LONG_DRAW_SECONDS", 0.1)
     monkeypatch.setattr(jobs, "PROGRESS_S", 0.0)
     s = Study(scene="damped", values={"gamma": 2e-4})
-    lr = longrun.LongRun(s, T_long=1e5)
+    lr = longrun.LongRun(s, T_long=5e5)  # 5e6 steps: long enough for several intervals
     progress, drawn_ = [], []
     lr.param.watch(lambda e: progress.append(time.perf_counter()), "progress")
     lr.param.watch(lambda e: drawn_.append(time.perf_counter()), "data")
@@ -649,7 +649,7 @@ def test_a_long_run_redraws_at_most_once_per_interval_and_ends_with_everything(m
     # building the envelopes. The last publication (the final envelopes) comes whenever the run ends.
     between = np.diff(drawn_[:-1])
     assert len(progress) > 3 * len(drawn_) and len(between) >= 3 and between.min() >= 0.07, (len(progress), between)
-    steps = round(1e5 / s.h)
+    steps = round(5e5 / s.h)
     width = -(-steps // longrun.LONG_BINS)
     for d in lr.data.values():  # every bin (t: the time after each bin's first step)
         assert len(d["t"]) == -(-steps // width)
@@ -664,7 +664,7 @@ def test_progress_reaches_the_page_at_most_once_per_progress_interval(monkeypatc
     monkeypatch.setattr(longrun, "LONG_CHUNK_SECONDS", 0.01)
     monkeypatch.setattr(jobs, "PROGRESS_S", 0.1)
     s = Study(scene="damped", values={"gamma": 2e-4})
-    lr = longrun.LongRun(s, T_long=1e5)
+    lr = longrun.LongRun(s, T_long=5e5)  # 5e6 steps: long enough for several intervals
     shown = []
     lr.param.watch(lambda e: shown.append((time.perf_counter(), e.new)), "progress")
     lr.start()
