@@ -172,7 +172,7 @@ PRESETS = (
             "values": {"q0": 3.0, "a": 0.3, "nu": 40.0}, "view": "compare"}, group=HARD, fails=("midpoint",)),
     Preset("Ten million steps",
            "The modulated oscillator to T = 1e6 at h = 0.1, 1e7 steps per method in the Long run view "
-           "(about a minute): midpoint's H + p_t stays bounded, RK4's drifts.",
+           "(5-10 s): midpoint's H + p_t stays bounded, RK4's drifts.",
            {"scene": "modulated", "method": "midpoint", "other": "rk4", "h": 0.1, "T": 50.0,
             "values": {}, "view": "long"}, T_long=1e6, group=HARD),
 )
