@@ -72,3 +72,24 @@ def test_the_equations_get_katexs_stylesheet_and_every_font_it_names():
     assert all(u.startswith(plotting.KATEX_URL) and (plotting.KATEX / u.removeprefix(plotting.KATEX_URL)).is_file()
                for u in re.findall(r"url\(([^)]+)\)", plotting.katex_css()))
     assert plotting.katex_css() in plotting.equation("$q$").stylesheets
+
+
+def test_components_get_bootstraps_reboot_and_the_page_the_whole_of_bootstrap():
+    """app/static/bootstrap_reboot.css is the Reboot section of the Bootstrap that Panel bundles,
+    verbatim; each component gets it in place of the whole sheet, which the page keeps."""
+    from pathlib import Path
+
+    import panel
+    from bokeh.document import Document
+
+    whole = (Path(panel.__file__).parent / "dist" / "bundled" / "bootstrap5" / "css" / "bootstrap.min.css").read_text()
+    reboot = (Path(main.__file__).resolve().parent.parent / main.REBOOT).read_text()
+    section = reboot[reboot.index("*/") + 2:].strip()
+    assert section.startswith("*,::after,::before{box-sizing:border-box}") and section in whole, \
+        "Panel bundles another Bootstrap: extract its Reboot section again"
+    assert whole[whole.index(section) + len(section):].startswith(".lead{")
+    template = main.App().template()
+    doc = template.server_doc(Document())
+    urls = [s.url for m in doc.models if hasattr(m, "stylesheets") for s in m.stylesheets if hasattr(s, "url")]
+    assert main.REBOOT in urls and not [u for u in urls if u.endswith("bootstrap.min.css")]
+    assert any("bootstrap.min.css" in str(u) for u in template.resolve_resources()["css"].values())
