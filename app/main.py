@@ -197,6 +197,6 @@ class App(param.Parameterized):
 
 
 pn.extension("katex", notifications=True, design=Design, js_files={"cosymp_bokeh_reads": BOKEH_READS},
-             raw_css=[katex_fonts_css()])
+             global_css=[katex_fonts_css()])  # the page's head only: a shadow root's @font-face is ignored
 pn.state.notifications.position = "bottom-left"  # over the sidebar's lower part, not over the plots
 App().template().servable(title="cosymp")

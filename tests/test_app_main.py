@@ -72,6 +72,9 @@ def test_the_equations_get_katexs_stylesheet_and_every_font_it_names():
     assert all(u.startswith(plotting.KATEX_URL) and (plotting.KATEX / u.removeprefix(plotting.KATEX_URL)).is_file()
                for u in re.findall(r"url\(([^)]+)\)", plotting.katex_css()))
     assert plotting.katex_css() in plotting.equation("$q$").stylesheets
+    # The fonts are declared once, in the page's head (a shadow root's @font-face is ignored; as
+    # raw_css they were copied into every component: half of the first page's document).
+    assert plotting.katex_fonts_css() in pn.config.global_css and plotting.katex_fonts_css() not in pn.config.raw_css
 
 
 def test_components_get_bootstraps_reboot_and_the_page_the_whole_of_bootstrap():
