@@ -50,7 +50,9 @@ class PlayView(FeatureView):
         self.now = Pair(self.orbit_fig, width=0, start=True)
         self.loop = Pair(figure("loop of initial states, now", "q1", "p1"), width=2)
         self.plots = time_plots(["energy", "area"])
-        self.cursors = [vline(f) for p in self.plots.values() for f in p.figures]
+        self.cursors = []
+        for p in self.plots.values():
+            p.decorate(lambda fig: self.cursors.append(vline(fig)))
         self.key = note("")
         self.clock = note("", width=220, sizing_mode=None)
         self._scene = None
