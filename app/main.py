@@ -4,6 +4,7 @@ Serve it with `panel serve app --setup app/warmup.py` (app/warmup.py makes the c
 ready first). Everything is served from this server: the Bootstrap template, KaTeX and
 BokehJS come from Panel's and Bokeh's bundled resources.
 """
+import contextlib
 import html
 import io
 from pathlib import Path
@@ -199,4 +200,7 @@ class App(param.Parameterized):
 pn.extension("katex", notifications=True, design=Design, js_files={"cosymp_bokeh_reads": BOKEH_READS},
              global_css=[katex_fonts_css()])  # the page's head only: a shadow root's @font-face is ignored
 pn.state.notifications.position = "bottom-left"  # over the sidebar's lower part, not over the plots
-App().template().servable(title="cosymp")
+# One recomputation of the document's model graph (a walk of every model) when the page is built,
+# not one per root the template adds (13, each over the graph so far): 0.12 s of the page's 0.37 s.
+with pn.state.curdoc.models.freeze() if pn.state.curdoc is not None else contextlib.nullcontext():
+    App().template().servable(title="cosymp")
