@@ -177,7 +177,8 @@ def test_a_bad_beta_is_a_notification_and_the_last_good_state_stays(page):
 
 
 def test_a_long_run_starts_shows_progress_and_cancels(page):
-    page.open(query(scene="damped", method="symplectic-euler", p={"gamma": 0.0002}, view="long", T_long=5e5))
+    # ten times the paper's horizon: its own 5e6 steps per method now end in about two seconds
+    page.open(query(scene="damped", method="symplectic-euler", p={"gamma": 0.0002}, view="long", T_long=5e6))
     page.page.locator("button", has_text="Start long run").click()
     page.page.get_by_text("running").first.wait_for()
     expect(page.page.locator(".colorkey").last).to_contain_text("rk4")
