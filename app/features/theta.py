@@ -5,9 +5,9 @@ import numpy as np
 import panel as pn
 import param
 
-from cosymp.diagnostics import det_deviation, symplecticity_defect, tangent_maps
+from cosymp.drive import Drive
 from cosymp.errors import RunError
-from cosymp.integrate import Setup, check_step, simulate
+from cosymp.integrate import Setup, check_step
 
 from ..plotting import FLOOR, SLOTS, Pair, figure, grid, note, pane, vline
 from ..study import Runs, comparison_bytes, failure_note, run_pair
@@ -37,10 +37,10 @@ def theta_sweep(setups, h, T):
         det, symp = [], []
         for th in SWEEP_THETAS:
             try:
-                run = simulate(Setup.make(s.scene, s.method, s.values, float(th)), h, steps * h)
-                M = tangent_maps(run)
-                det.append(float(np.max(det_deviation(M))))
-                symp.append(float(np.max(symplecticity_defect(M))))
+                drive = Drive(Setup.make(s.scene, s.method, s.values, float(th)), h, energy=False)
+                drive.run(steps)
+                det.append(drive.det_max_dev)
+                symp.append(drive.symp_max_dev)
             except RunError:
                 det.append(np.nan)
                 symp.append(np.nan)
