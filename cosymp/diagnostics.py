@@ -79,7 +79,7 @@ class MapGrowth:
     driver (cosymp.drive) multiplies the maps into A as it steps, taking out an exact power of
     two whenever A's entries leave [2^-64, 2^64], so any horizon fits in floating point; scaled
     steps (the damped scene) are undone exactly. state: (log of the scale taken out, the scaling exponent A is kept in, 1.0 while
-    every map was finite and non-singular)."""
+    the product stayed finite and not zero)."""
 
     def __init__(self, m):
         self.A = np.eye(m)

@@ -34,8 +34,9 @@ class Drive:
 
     every: form member 0's tangent map at every `every`-th step (0: never; growth needs 1);
     width: bin width in steps of the envelopes (0: none); growth: keep the product of the maps
-    (a diagnostics.MapGrowth); energy, maps: whether to reduce max |H + p_t| and the maps'
-    det and symplecticity (a figure not asked for is NaN and costs nothing). Calls of `advance`
+    (a diagnostics.MapGrowth); energy, maps: whether to reduce max |H + p_t| (always with bins,
+    whose envelopes hold it) and the maps' det and symplecticity (a figure not asked for is NaN
+    and costs nothing; without maps or growth no map is formed). Calls of `advance`
     continue the run as one call would (the steps are numbered from the run's start); bins and
     the maps' sampling are counted from the run's first step when each call's length is a
     multiple of `unit`.
@@ -55,7 +56,7 @@ class Drive:
         self.t0 = float(t0)
         self.t = self.t0
         self.done = 0
-        self.every = int(every)
+        self.every = int(every) if maps or growth else 0  # maps no figure needs are not formed
         self.width = int(width)
         m = 2 * setup.scene.ndof
         self.growth = MapGrowth(m) if growth else None
@@ -88,18 +89,19 @@ class Drive:
 
     def advance(self, steps):
         """One compiled call of `steps` steps. Returns this call's bins ({"t": ..., ENV: ...},
-        or None without width). A failure (overflow, Newton) stops the run: its message is kept
-        in `failure`, the bins and state are those before the failing step, and later calls
-        do nothing."""
+        or None without width; a bin without a sampled map has NaN defects). A failure
+        (overflow, Newton) stops the run: its message is kept in `failure`, the bins and maxima
+        are those of the steps before the failing one, the state is not meaningful (members
+        before the failing one have taken that step), and later calls do nothing."""
         if self.failure:
-            return None
+            return {k: np.empty(0) for k in ("t",) + ENV} if self.width else None
         s = self.setup
         N, m = self.Z.shape
         bins = -(-steps // self.width) if self.width else 0
         env = np.empty((bins, len(ENV)))
         env[:, 0::2] = math.inf
         env[:, 1::2] = -math.inf
-        env[:, 4:] = 0.0 if self.want & WANT_MAPS else math.nan
+        env[:, 4:] = -math.inf  # stays so in a bin without a sampled map: NaN below
         tb = np.empty(bins)
         Trec, Zrec, PTrec = np.empty(2), np.empty((2, N, m)), np.empty((2, N))
         ends = (self.t0 + self.done * self.h, self.t0 + (self.done + steps) * self.h)
@@ -118,16 +120,17 @@ class Drive:
             bins = -(-k // self.width) if self.width else 0
         if not self.width:
             return None
+        env[:, 4:][env[:, 4:] == -math.inf] = math.nan
         out = {"t": tb[:bins]}
         out.update({name: env[:bins, j] for j, name in enumerate(ENV)})
         if N < m + 2:
             out["vol_min"] = out["vol_max"] = np.full(bins, math.nan)
         return out
 
-    def run(self, steps, progress=None):
+    def run(self, steps, progress=None, strict=True):
         """advance() in calls of at most CHUNK steps (a multiple of `unit`), progress(done, steps)
-        after each; returns the bins concatenated ({} without width). Raises RunError on a
-        failure."""
+        after each; returns the bins concatenated ({} without width). A failure raises RunError,
+        or with strict=False ends the run, its bins kept and its message in `failure`."""
         chunk = self.unit * max(1, CHUNK // self.unit)
         parts = []
         start = self.done
@@ -137,7 +140,7 @@ class Drive:
                 parts.append(part)
             if progress:
                 progress(self.done - start, steps)
-        if self.failure:
+        if self.failure and strict:
             raise RunError(self.failure, self.t, self.done)
         return concat(parts)
 

@@ -7,7 +7,6 @@ import numpy as np
 
 from .diagnostics import det_deviation, distance, nearby_states, norm, symplecticity_defect, tangent_maps
 from .drive import CHUNK, Drive
-from .errors import RunError
 from .integrate import Setup, check_step, simulate
 from .kernels.loops import energies
 from .kernels.survey import ACC, ENV
@@ -122,32 +121,22 @@ def run_summary(setup, h, T, transport_from=None, with_error=True, progress=None
     return out
 
 
-def long_chunk(setup, h, steps, Z, PT, start, width):
-    """Advance the ensemble Z (member 0 the trajectory, 1.. the nearby states) by `steps` steps
-    from step `start`; returns (per-bin reductions or None, Z, PT, failure message). The
-    reductions over bins of `width` steps (kernels.survey.ENV): t (the time after each bin's
-    first step), min and max of H + p_t and of the paper's volume estimator, max of
-    |det M_k - 1| and of ||M_k^T J M_k - J||."""
-    drive = Drive(setup, h, z0=Z, pt0=PT, t0=start * h, width=width)
-    bins = drive.advance(steps)
-    if bins is None or not len(bins["t"]):
-        return None, Z, PT, drive.failure
-    return bins, drive.Z, drive.PT, drive.failure
+def long_drive(setup, h, width, delta=1e-4):
+    """A long run of setup with the 2n + 1 nearby states of the paper's estimators, reduced to bins
+    of `width` steps (drive.Drive: advance() returns each call's bins, kernels.survey.ENV: t, the
+    time after each bin's first step; min and max of H + p_t and of the paper's volume
+    estimator; max of |det M_k - 1| and of ||M_k^T J M_k - J||)."""
+    n = setup.scene.ndof
+    return Drive(setup, h, z0=nearby_states(setup.start[0], delta, 2 * n + 1), width=width)
 
 
 def long_envelopes(setup, h, T, bins, delta=1e-4, progress=None):
-    """A long run of setup (with the 2n+1 nearby states of the paper's estimators) reduced to
-    at most `bins` bins (see long_chunk); returns (dict of arrays, failure message)."""
+    """A long run of setup (see long_drive) reduced to at most `bins` bins; returns (dict of
+    arrays, failure message): the bins up to a failure, and its message."""
     steps = check_step(h, T)
-    width = max(1, math.ceil(steps / bins))
-    n = setup.scene.ndof
-    drive = Drive(setup, h, z0=nearby_states(setup.start[0], delta, 2 * n + 1), width=width)
-    try:
-        out = drive.run(steps, progress)
-    except RunError:
-        out = None
-    keys = ("t",) + ENV
-    return out or {k: np.empty(0) for k in keys}, drive.failure
+    drive = long_drive(setup, h, max(1, math.ceil(steps / bins)), delta)
+    out = drive.run(steps, progress, strict=False)
+    return out or {k: np.empty(0) for k in ("t",) + ENV}, drive.failure
 
 
 def paper_volume_run(h=0.1, T=5e5, gamma=2e-4, methods=("midpoint", "rk4"), delta=1e-4):

@@ -16,9 +16,10 @@ from cosymp.diagnostics import (
 )
 from cosymp.drive import Drive
 from cosymp.integrate import Setup, simulate
+from cosymp.kernels.survey import _least, _most
 from cosymp.methods import METHODS
 from cosymp.scenes import SCENES
-from cosymp.summary import long_chunk, run_summary
+from cosymp.summary import long_drive, long_envelopes, run_summary
 
 PAIRS = [(s, m) for s in SCENES for m in METHODS if METHODS[m].refusal(SCENES[s]) is None and m != "exact"]
 STEPS = 48
@@ -69,8 +70,10 @@ def test_envelopes_match_numpy_reductions(scene, method):
     n = s.scene.ndof
     Z0 = nearby_states(s.start[0], 1e-4, 2 * n + 1)
     tr, M = numpy_figures(s, h, STEPS, Z0)
-    bins, Z, _, failure = long_chunk(s, h, STEPS, Z0, None, 0, WIDTH)
-    assert failure == ""
+    drive = long_drive(s, h, WIDTH)
+    bins = drive.advance(STEPS)
+    Z = drive.Z
+    assert drive.failure == ""
 
     def reduce(values, op):
         return op.reduceat(values, np.arange(0, len(values), WIDTH))
@@ -127,14 +130,34 @@ def test_sampled_maps_are_a_subset_of_every_map():
 
 def test_failure_keeps_the_data_before_it():
     """The damped scene's RK4 at a step past its stability overflows: the driver stops there,
-    says so, and keeps the bins and maxima of the steps before."""
+    says so, and keeps the bins and maxima of the steps before; so does a long run's envelopes
+    (the paper report's), and a call after the failure adds nothing."""
     s = Setup.make("damped", "rk4", {"gamma": 0.0})
     h = 3.0
-    bins, Z, PT, failure = long_chunk(s, h, 4000, nearby_states(s.start[0], 1e-4, 3), None, 0, 10)
-    assert failure.startswith("overflow in step")
-    assert 0 < len(bins["t"]) < 400
+    drive = long_drive(s, h, 10)
+    bins = drive.advance(4000)
+    assert drive.failure.startswith("overflow in step")
+    assert 0 < len(bins["t"]) < 400 and len(bins["t"]) == -(-drive.done // 10)
     assert np.all(np.isfinite(bins["H_max"][:10]))  # H itself overflows before the state does
-    assert np.all(np.isfinite(Z)) and np.all(np.isfinite(PT))
+    assert len(drive.advance(100)["t"]) == 0
+    env, failure = long_envelopes(s, h, 4000 * h, 400)
+    assert failure == drive.failure
+    for k in bins:
+        np.testing.assert_array_equal(env[k], bins[k])
+
+
+def test_a_nan_is_kept_by_the_reductions():
+    """numba's max(a, nan) is a: the reductions use their own, which keep a NaN as NumPy does."""
+    nan = math.nan
+    assert math.isnan(_most(1.0, nan)) and math.isnan(_most(nan, 1.0))
+    assert math.isnan(_least(1.0, nan)) and math.isnan(_least(nan, 1.0))
+    assert _most(1.0, 2.0) == 2.0 and _least(1.0, 2.0) == 1.0
+
+
+def test_a_bin_without_a_sampled_map_says_so():
+    s = Setup.make("kapitza", "midpoint")
+    bins = Drive(s, s.scene.h, z0=nearby_states(s.start[0], 1e-4, 3), width=2, every=4).run(16)
+    assert np.all(np.isfinite(bins["det"][0::2])) and np.all(np.isnan(bins["det"][1::2]))
 
 
 def test_run_summary_reports_the_fused_figures():

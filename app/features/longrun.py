@@ -11,11 +11,10 @@ import numpy as np
 import panel as pn
 import param
 
-from cosymp.diagnostics import nearby_states
 from cosymp.drive import CHUNK
 from cosymp.integrate import check_step
 from cosymp.report.style import pair_colors
-from cosymp.summary import long_chunk
+from cosymp.summary import long_drive
 
 from ..jobs import Job, Note
 from ..plotting import SLOTS, Pair, figure, grid, note, pane, series, swatch, zero_floor
@@ -48,8 +47,8 @@ def envelopes(series_):
     return {x.label: {**x.arrays(), "failure": x.failure, "method": x.method} for x in series_}
 
 
-def _chunk(setups, states, h, n, done, width, i):
-    return long_chunk(setups[i], h, n, *states[i], done, width)
+def _chunk(drives, n, i):
+    return drives[i].advance(n)
 
 
 class LongRun(Job):
@@ -104,7 +103,8 @@ class LongRun(Job):
         width = max(1, math.ceil(steps / LONG_BINS))
         cap = width * max(1, CHUNK // width)
         found = [LongSeries(x.method.label(x.theta), x.method.name) for x in setups]
-        states = [(nearby_states(x.start[0], DELTA, 2 * x.scene.ndof + 1), None) for x in setups]
+        # one run per method, advanced chunk by chunk: it takes exactly the steps of one call
+        drives = [long_drive(x, h, width, DELTA) for x in setups]
         active = [True] * len(setups)
         done = 0
         chunk = min(cap, width * max(1, 4096 // width))
@@ -115,15 +115,14 @@ class LongRun(Job):
                     n = min(chunk, steps - done)
                     tick = time.perf_counter()
                     running = [i for i, a in enumerate(active) if a]
-                    outs = list(pool.map(partial(_chunk, setups, states, h, n, done, width), running))
-                    for i, (red, Z, PT, failure) in zip(running, outs):
-                        states[i] = (Z, PT)
-                        if red is not None:
+                    outs = list(pool.map(partial(_chunk, drives, n), running))
+                    for i, red in zip(running, outs):
+                        if len(red["t"]):
                             for k, v in red.items():
                                 found[i].parts[k].append(v)
-                        if failure:
+                        if drives[i].failure:
                             active[i] = False
-                            found[i].failure = failure
+                            found[i].failure = drives[i].failure
                     done += n
                     now = time.perf_counter()
                     chunk = min(cap, width * max(1, round(n * LONG_CHUNK_SECONDS / max(now - tick, 1e-3) / width)))

@@ -46,6 +46,18 @@ ENV = ("H_min", "H_max", "vol_min", "vol_max", "det", "symp")
 
 
 @njit(**INLINE)
+def _most(a, b):
+    """max(a, b), NaN if either is (numba's max drops a NaN argument, NumPy's maximum keeps it)."""
+    return b if b > a or math.isnan(b) else a
+
+
+@njit(**INLINE)
+def _least(a, b):
+    """min(a, b), NaN if either is."""
+    return b if b < a or math.isnan(b) else a
+
+
+@njit(**INLINE)
 def determinant(A, m):
     """det of A[:m, :m] by LU with partial pivoting (A is overwritten)."""
     d = 1.0
@@ -89,8 +101,8 @@ def symplecticity(M, m):
                 v += a - b
                 s += abs(a) + abs(b)
             target = 1.0 if j == i + n else (-1.0 if i == j + n else 0.0)
-            worst = max(worst, abs(v - target))
-            size = max(size, s)
+            worst = _most(worst, abs(v - target))
+            size = _most(size, s)
     return worst, worst / size if size > 0.0 else math.inf
 
 
@@ -114,9 +126,11 @@ def grow(M, e, A, B, state, m):
             s = 0.0
             for r in range(m):
                 s += M[i, r] * A[r, j]
+            if not np.isfinite(s):
+                return False
             B[i, j] = s
             big = max(big, abs(s))
-    if not (0.0 < big < np.inf):
+    if big == 0.0:
         return False
     f = 1.0
     if not (2.0 ** -RANGE < big < 2.0 ** RANGE):
@@ -154,7 +168,7 @@ def _reduce(k, width, t1, M, mapped, want, e, hext, X, volume, acc, env, tb, G, 
     """Fold one step's wanted figures into acc, its bin and the growth product (gstate[2] = 0
     once that product stopped being finite)."""
     if want & WANT_H:
-        acc[0] = max(acc[0], abs(hext))
+        acc[0] = _most(acc[0], abs(hext))
     dev = symp = 0.0
     if mapped and want & WANT_MAPS:
         for i in range(m):
@@ -162,24 +176,24 @@ def _reduce(k, width, t1, M, mapped, want, e, hext, X, volume, acc, env, tb, G, 
                 B[i, j] = M[i, j]
         dev = abs(determinant(B, m) - 1.0)
         symp, rel = symplecticity(M, m)
-        acc[1] = max(acc[1], dev)
-        acc[2] = max(acc[2], symp)
-        acc[3] = max(acc[3], rel)
+        acc[1] = _most(acc[1], dev)
+        acc[2] = _most(acc[2], symp)
+        acc[3] = _most(acc[3], rel)
     if mapped and G.shape[0] > 0 and gstate[2] == 1.0 and not grow(M, e, G, B, gstate, m):
         gstate[2] = 0.0
     if width > 0:
         b = k // width
         if k % width == 0:
             tb[b] = t1
-        env[b, 0] = min(env[b, 0], hext)
-        env[b, 1] = max(env[b, 1], hext)
+        env[b, 0] = _least(env[b, 0], hext)
+        env[b, 1] = _most(env[b, 1], hext)
         if volume:
             vol = determinant(X, m + 1)
-            env[b, 2] = min(env[b, 2], vol)
-            env[b, 3] = max(env[b, 3], vol)
+            env[b, 2] = _least(env[b, 2], vol)
+            env[b, 3] = _most(env[b, 3], vol)
         if mapped:
-            env[b, 4] = max(env[b, 4], dev)
-            env[b, 5] = max(env[b, 5], symp)
+            env[b, 4] = _most(env[b, 4], dev)
+            env[b, 5] = _most(env[b, 5], symp)
 
 
 @njit(**INLINE)
