@@ -103,13 +103,12 @@ class Drive:
         env[:, 1::2] = -math.inf
         env[:, 4:] = -math.inf  # stays so in a bin without a sampled map: NaN below
         tb = np.empty(bins)
-        Trec, Zrec, PTrec = np.empty(2), np.empty((2, N, m)), np.empty((2, N))
         ends = (self.t0 + self.done * self.h, self.t0 + (self.done + steps) * self.h)
         scaled = s.scene.needs_scaling(s.P, max(abs(ends[0]), abs(ends[1])))
         out = np.zeros((1, 3), dtype=np.int64)
         survey(s.data, s.P, NO_ROWS, self.t0, self.done, self.h, self.Z[None], self.PT[None], self._sum[None],
-               self._comp[None], steps, steps, Trec, Zrec, PTrec, self.every, self.want, self.width, self.acc[None], env,
-               tb, self._G[None], self._gstate[None], out, scaled, False)
+               self._comp[None], steps, self.every, self.want, self.width, self.acc[None], env, tb, self._G[None],
+               self._gstate[None], out, scaled, False)
         status, k, in_tangent = out[0]
         self.done += k
         self.t = self.t0 + self.done * self.h
@@ -176,9 +175,8 @@ def batch_runs(setup, h, steps, R, Z0, with_det=True, growth=False, energy=True)
     scaled = any(setup.scene.needs_scaling(setup.scene.Params(*row), steps * h) for row in R)
     Z = np.array(Z0, dtype=float).reshape(B, 1, m)
     PT, S, Cc = np.empty((B, 1)), np.empty((B, 1)), np.empty((B, 1))
-    Trec, Zrec, PTrec = np.empty(2), np.empty((2, 1, m)), np.empty((2, 1))
-    survey(setup.data, setup.P, R, 0.0, 0, float(h), Z, PT, S, Cc, int(steps), int(steps), Trec, Zrec, PTrec, every, want,
-           0, acc, np.empty((0, len(ENV))), np.empty(0), G, gstate, status, scaled, True)
+    survey(setup.data, setup.P, R, 0.0, 0, float(h), Z, PT, S, Cc, int(steps), every, want, 0, acc,
+           np.empty((0, len(ENV))), np.empty(0), G, gstate, status, scaled, True)
     if not want & WANT_H:
         acc[:, 0] = math.nan
     if not want & WANT_MAPS:

@@ -6,13 +6,13 @@ coordinates as kernels.loops.tangent_matrix and tangent_complex give it) feeds t
 maxima of |det M_k - 1| and of the symplecticity defect, and the growth product; H + p_t of
 member 0 feeds its running maximum; with 2n + 2 members, members 1..2n+1 give the paper's
 volume estimator det[X^1 ... X^(2n+1)] of their increments; and each of these is also reduced
-to per-bin minima and maxima over bins of `width` steps. States are recorded at a stride, as
-kernels.loops.propagate_members records them.
+to per-bin minima and maxima over bins of `width` steps. No state is recorded: the members'
+states Z and p_t PT are advanced in place.
 
-Arguments shared by both loops (those of propagate_members without dZrec, and first: the steps
-are numbered from `first`, at times t0 + (first + k) h, and S, Cc: p_t's compensated sum and its
-compensation, carried from call to call, so that a run cut into calls takes the same steps as
-one call): every: form member 0's tangent map at the steps k with k % every == 0 (0:
+Arguments shared by both loops: D, P, t0, h, Z, PT, nsteps as kernels.loops.propagate_members
+takes them; first: the steps are numbered from `first`, at times t0 + (first + k) h, and S, Cc:
+p_t's compensated sum and its compensation, carried from call to call, so that a run cut into
+calls takes the same steps as one call; every: form member 0's tangent map at the steps k with k % every == 0 (0:
 never); want: which figures to reduce (WANT_H: H + p_t; WANT_MAPS: det and symplecticity of the
 maps), the growth product being kept wherever G is given; scaled: whether the run's range needs
 the scene's scaled steps (scenes.base.Scene.needs_scaling);
@@ -34,7 +34,7 @@ from numba.np.unsafe.ndarray import to_fixed_tuple
 from .borrow import borrow
 from .dispatch import _INLINE, INLINE, JIT, coef, energy, lmatrix, lwork, ncoef, ndof, scaling, step, work
 from .families import OK
-from .loops import COMPLEX_STEP, _accept, _add, _coefs, _factors, _record_start, _rescale
+from .loops import COMPLEX_STEP, _accept, _add, _coefs, _factors, _rescale
 from .stack import _scene, coef_table, matrices, vectors
 
 ACC = ("H_ext_max_abs", "det_max_dev", "symp_max_dev", "symp_max_rel")
@@ -197,7 +197,7 @@ def _reduce(k, width, t1, M, mapped, want, e, hext, X, volume, acc, env, tb, G, 
 
 
 @njit(**INLINE)
-def _members_run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PTrec, every, want, width, acc, env, tb, G,
+def _members_run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, env, tb, G,
                  gstate, scaled):
     """Member steps (any scene); member 0's tangent map by complex step of its step."""
     C = coef_table(D, P)
@@ -213,13 +213,11 @@ def _members_run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, P
     n = m // 2
     X = np.empty((m + 1, m + 1))
     volume = Z.shape[0] >= m + 2
-    none = np.empty((0, 0, m))
+    none, flat = np.empty((0, 0, m)), np.empty((0, 0))  # no records
     u = len(D.offsets)
     can_reuse = u > 1 and D.offsets[0] == 0.0 and D.offsets[u - 1] == 1.0
     end = u - 1 if D.offsets[u - 1] == 1.0 else -1
     hnew = 0.0
-    _record_start(t0 + first * h, Z, PT, Trec, Zrec, PTrec, none, m)
-    rec = 1
     prev = 0
     up = down = 1.0
     for k in range(nsteps):
@@ -243,7 +241,6 @@ def _members_run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, P
                     return status, k, True
                 for r in range(m):
                     M[r, j] = zc[r].imag / COMPLEX_STEP
-        recording = (k + 1) % stride == 0 or k + 1 == nsteps
         t1 = t0 + (g + 1) * h
         for i in range(Z.shape[0]):
             for r in range(m):
@@ -255,7 +252,7 @@ def _members_run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, P
                 hnew = _energy_after(P, C, end, Ce, t1 - tau, z)
             _rescale(z, n, e, up, down)
             sum_, comp = _add(S, Cc, i, dpt)
-            status = _accept(status, i, z, old, sum_ + comp, Z, PT, rec, recording, Zrec, PTrec, none, m)
+            status = _accept(status, i, z, old, sum_ + comp, Z, PT, 0, False, none, flat, none, m)
             if status != OK:
                 return status, k, False
             S[i], Cc[i] = sum_, comp
@@ -263,14 +260,11 @@ def _members_run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, P
                 _increment_row(X, i - 1, z, old, h, n)
         hext = hnew + PT[0]
         _reduce(k, width, t1, M, mapped, want, e, hext, X, volume, acc, env, tb, G, B, gstate, m)
-        if recording:
-            Trec[rec] = t1
-            rec += 1
     return OK, nsteps, False
 
 
 @njit(**INLINE)
-def _matrix_run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PTrec, every, want, width, acc, env, tb, G,
+def _matrix_run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, env, tb, G,
                 gstate, scaled):
     """A linear scene: one step matrix per step (kernels.linear), applied to every member, and
     itself member 0's tangent map."""
@@ -285,13 +279,11 @@ def _matrix_run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PT
     n = m // 2
     X = np.empty((m + 1, m + 1))
     volume = Z.shape[0] >= m + 2
-    none = np.empty((0, 0, m))
+    none, flat = np.empty((0, 0, m)), np.empty((0, 0))  # no records
     u = len(D.offsets)
     can_reuse = u > 1 and D.offsets[0] == 0.0 and D.offsets[u - 1] == 1.0
     end = u - 1 if D.offsets[u - 1] == 1.0 else -1
     hnew = 0.0
-    _record_start(t0 + first * h, Z, PT, Trec, Zrec, PTrec, none, m)
-    rec = 1
     prev = 0
     up = down = 1.0
     for k in range(nsteps):
@@ -303,7 +295,6 @@ def _matrix_run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PT
         tk = t0 + g * h - tau
         s = lmatrix(D, P, C, tk, h, M, Q, LW)
         mapped = every > 0 and k % every == 0
-        recording = (k + 1) % stride == 0 or k + 1 == nsteps
         t1 = t0 + (g + 1) * h
         for i in range(Z.shape[0]):
             quad = 0.0
@@ -323,7 +314,7 @@ def _matrix_run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PT
                 hnew = _energy_after(P, C, end, Ce, t1 - tau, z)
             _rescale(z, n, e, up, down)
             sum_, comp = _add(S, Cc, i, -(0.5 * quad + s))
-            status = _accept(OK, i, z, old, sum_ + comp, Z, PT, rec, recording, Zrec, PTrec, none, m)
+            status = _accept(OK, i, z, old, sum_ + comp, Z, PT, 0, False, none, flat, none, m)
             if status != OK:
                 return status, k, False
             S[i], Cc[i] = sum_, comp
@@ -331,9 +322,6 @@ def _matrix_run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PT
                 _increment_row(X, i - 1, z, old, h, n)
         hext = hnew + PT[0]
         _reduce(k, width, t1, M, mapped, want, e, hext, X, volume, acc, env, tb, G, B, gstate, m)
-        if recording:
-            Trec[rec] = t1
-            rec += 1
     return OK, nsteps, False
 
 
@@ -363,38 +351,38 @@ def _start(P, t, Z, Ce, zs, m):
     return energy(P, Ce, 0, zs)
 
 
-def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PTrec, every, want, width, acc, env, tb, G,
+def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, env, tb, G,
            gstate, scaled):
     """The fused loop for the scene: _matrix_run on a linear one, else _members_run."""
 
 
 @overload(_fused, jit_options=_INLINE)
-def _fused_impl(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PTrec, every, want, width, acc, env, tb, G,
+def _fused_impl(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, env, tb, G,
                 gstate, scaled):
     run = _matrix_run if _scene(P).linear else _members_run
 
-    def impl(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PTrec, every, want, width, acc, env, tb, G,
+    def impl(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, env, tb, G,
              gstate, scaled):
-        return run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PTrec, every, want, width, acc, env, tb,
+        return run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, env, tb,
                    G, gstate, scaled)
 
     return impl
 
 
 @njit(**JIT)
-def survey(D, P, R, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PTrec, every, want, width, acc, env, tb, G,
+def survey(D, P, R, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, env, tb, G,
            gstate, status, scaled, start):
     """B = len(Z) runs of the fused loop for the scene (_fused) in one call, its arrays borrowed.
 
     Run b advances the members Z[b] (p_t PT[b], its compensated sum S[b] and compensation Cc[b])
     with the scene's parameters P, or R[b] where R has rows (a batch over parameter sets: one
     compiled call for a sweep's grid, no Python per point; scenes whose parameters are all
-    floats), and reduces into acc[b], G[b], gstate[b]; records and bins (Trec, Zrec, PTrec, env,
-    tb) are run 0's (a batch asks for none). With `start`, each run starts from its state at t0
+    floats), and reduces into acc[b], G[b], gstate[b]; bins (env, tb) are run 0's (a batch asks
+    for none). With `start`, each run starts from its state at t0
     with p_t = -H (START where H is not finite there). status[b] = (status, steps completed, 1
     if the failure came from the tangent map's complex step)."""
-    D, P, R, Z, PT, S, Cc, Trec, Zrec, PTrec, acc, env, tb, G, gstate, status = borrow(
-        (D, P, R, Z, PT, S, Cc, Trec, Zrec, PTrec, acc, env, tb, G, gstate, status))
+    D, P, R, Z, PT, S, Cc, acc, env, tb, G, gstate, status = borrow(
+        (D, P, R, Z, PT, S, Cc, acc, env, tb, G, gstate, status))
     m = 2 * ndof(P)
     Ce = np.empty((1, ncoef(P)))
     zs = np.empty(m)
@@ -407,6 +395,6 @@ def survey(D, P, R, t0, first, h, Z, PT, S, Cc, nsteps, stride, Trec, Zrec, PTre
                 continue
             PT[b, 0] = S[b, 0] = -H0
             Cc[b, 0] = 0.0
-        st, k, tangent_failed = _fused(D, Pb, t0, first, h, Z[b], PT[b], S[b], Cc[b], nsteps, stride, Trec, Zrec, PTrec,
+        st, k, tangent_failed = _fused(D, Pb, t0, first, h, Z[b], PT[b], S[b], Cc[b], nsteps,
                                        every, want, width, acc[b], env, tb, G[b], gstate[b], scaled)
         status[b, 0], status[b, 1], status[b, 2] = st, k, tangent_failed
