@@ -83,6 +83,26 @@ def _accept(status, i, z, old, pt, Z, PT, rec, recording, Zrec, PTrec, dZrec, m)
 
 
 @njit(**INLINE)
+def apply_matrix(Z, i, M, Q, old, zs, z, m, e, up, down):
+    """A linear scene's step on member i: old <- Z[i]; z <- M zs with zs = old in the step's scaled
+    coordinates (exponent e), z left scaled; returns zs.Q zs, p_t's quadratic term."""
+    quad = 0.0
+    for r in range(m):
+        old[r] = Z[i, r]
+        zs[r] = old[r]
+    _rescale(zs, m // 2, e, down, up)
+    for r in range(m):
+        acc = 0.0
+        qr = 0.0
+        for c in range(m):
+            acc += M[r, c] * zs[c]
+            qr += Q[r, c] * zs[c]
+        z[r] = acc
+        quad += zs[r] * qr
+    return quad
+
+
+@njit(**INLINE)
 def _add(S, Cc, i, d):
     """Neumaier's compensated sum: S[i] + Cc[i] + d as a new (sum, compensation) pair. p_t is a
     sum of one increment per step, and its round-off (up to half an ulp per step) overtook the
@@ -130,19 +150,7 @@ def propagate_matrix(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZre
         s = lmatrix(D, P, C, tk, h, M, Q, LW)
         recording = (k + 1) % stride == 0 or k + 1 == nsteps
         for i in range(Z.shape[0]):
-            quad = 0.0
-            for r in range(m):
-                old[r] = Z[i, r]
-                zs[r] = old[r]
-            _rescale(zs, m // 2, e, down, up)
-            for r in range(m):
-                acc = 0.0
-                qr = 0.0
-                for c in range(m):
-                    acc += M[r, c] * zs[c]
-                    qr += Q[r, c] * zs[c]
-                z[r] = acc
-                quad += zs[r] * qr
+            quad = apply_matrix(Z, i, M, Q, old, zs, z, m, e, up, down)
             _rescale(z, m // 2, e, up, down)
             sum_, comp = _add(S, Cc, i, -(0.5 * quad + s))
             status = _accept(OK, i, z, old, sum_ + comp, Z, PT, rec, recording, Zrec, PTrec, dZrec, m)

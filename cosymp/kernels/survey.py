@@ -34,7 +34,7 @@ from numba.np.unsafe.ndarray import to_fixed_tuple
 from .borrow import borrow
 from .dispatch import _INLINE, INLINE, JIT, coef, energy, lmatrix, lwork, ncoef, ndof, scaling, step, work
 from .families import OK
-from .loops import COMPLEX_STEP, _accept, _add, _coefs, _factors, _rescale
+from .loops import COMPLEX_STEP, _accept, _add, _coefs, _factors, _rescale, apply_matrix
 from .stack import _scene, coef_table, matrices, vectors
 
 ACC = ("H_ext_max_abs", "det_max_dev", "symp_max_dev", "symp_max_rel")
@@ -297,19 +297,7 @@ def _matrix_run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, ac
         mapped = every > 0 and k % every == 0
         t1 = t0 + (g + 1) * h
         for i in range(Z.shape[0]):
-            quad = 0.0
-            for r in range(m):
-                old[r] = Z[i, r]
-                zs[r] = old[r]
-            _rescale(zs, n, e, down, up)
-            for r in range(m):
-                acc_ = 0.0
-                qr = 0.0
-                for c in range(m):
-                    acc_ += M[r, c] * zs[c]
-                    qr += Q[r, c] * zs[c]
-                z[r] = acc_
-                quad += zs[r] * qr
+            quad = apply_matrix(Z, i, M, Q, old, zs, z, m, e, up, down)
             if i == 0 and want & WANT_H:
                 hnew = _energy_after(P, C, end, Ce, t1 - tau, z)
             _rescale(z, n, e, up, down)
