@@ -12,21 +12,19 @@ from urllib.parse import parse_qsl, urlencode
 
 import panel as pn
 import param
-from panel.theme import Bootstrap
 
 from cosymp.errors import InputError, RunError
 
 from .features import FEATURES
 from .jobs import Note
 from .memory import log_when_freed, map_large_blocks
+from .page import SCRIPTS, Design, adjust_panel
 from .plotting import katex_fonts_css
 from .presets import URL_NAMES, parse_items, query_items
 from .study import Controls, PresetLinks, SceneInfo, Study, study_report
 from .warmup import prepare
 
 ASSETS = Path(__file__).resolve().parent.parent / "assets"
-BOKEH_READS = "app/static/bokeh_reads.js"  # served from app/static by the server (see the file)
-REBOOT = "app/static/bootstrap_reboot.css"  # Bootstrap's Reboot section, verbatim (see Design)
 NOTIFY_MS = {"error": 8000, "warning": 6000, "info": 4000}
 COPY_LINK_JS = """
 const label = 'Copy link to this view';
@@ -40,23 +38,6 @@ if (!(navigator.clipboard && window.isSecureContext)) {
     () => { clearTimeout(waited); done('Copy failed: use the address bar'); });
 }
 """
-
-
-class Design(Bootstrap):
-    """Panel's Bootstrap design with Bootstrap's Reboot (its element defaults: 81 rules) in each
-    component's shadow root instead of the whole of bootstrap.min.css (2,490 rules; no other rule of
-    it matches an element there). The page keeps the whole sheet. Panel renders each component in
-    a shadow root with its own copy of the design's sheets, and a style recalculation matches every
-    element of a root against all of its rules: with the whole sheet, each of the many that BokehJS
-    forces by reading the layout back cost 1-3 ms, and a scene change a third of its time."""
-
-    @classmethod
-    def _get_modifiers(cls, viewable, theme=None, isolated=True):
-        modifiers, children = super()._get_modifiers(viewable, theme, isolated)
-        whole = set(cls._resources["css"].values())
-        if "stylesheets" in modifiers:
-            modifiers["stylesheets"] = [REBOOT if s in whole else s for s in modifiers["stylesheets"]]
-        return modifiers, children
 
 
 class App(param.Parameterized):
@@ -184,20 +165,24 @@ class App(param.Parameterized):
         share = pn.widgets.Button(name="Copy link to this view", sizing_mode="stretch_width")
         share.js_on_click(code=COPY_LINK_JS)
         busy = self.study.param.running
-        spinner = pn.indicators.LoadingSpinner(value=busy, visible=busy, size=24)
+        # Shown and hidden by its style only: a change of `visible` or of a component's classes makes
+        # BokehJS lay out the whole page (Panel's own busy indicator, off below, did that on every event).
+        spinner = pn.indicators.LoadingSpinner(value=True, size=24, styles=pn.bind(
+            lambda running: {"visibility": "visible" if running else "hidden"}, busy))
         download = pn.widgets.FileDownload(callback=self._report, filename="cosymp-report.html",
                                            label="Download report (HTML)", button_type="primary",
                                            sizing_mode="stretch_width")
         return pn.template.BootstrapTemplate(
             title="cosymp: structure-preserving integrators for time-dependent Hamiltonians",
             logo=str(ASSETS / "logo.svg"), favicon=str(ASSETS / "logo.svg"), header_background="#0b3d91",
-            sidebar_width=360, design=Design,
+            sidebar_width=360, design=Design, busy_indicator=None,
             sidebar=[Controls(study=self.study), pn.layout.Divider(), PresetLinks(), share, download],
             main=[pn.Row(SceneInfo(study=self.study), spinner, sizing_mode="stretch_width"), self.tabs],
         )
 
 
-pn.extension("katex", notifications=True, design=Design, js_files={"cosymp_bokeh_reads": BOKEH_READS},
+adjust_panel()
+pn.extension("katex", notifications=True, design=Design, js_files=SCRIPTS,
              global_css=[katex_fonts_css()])  # the page's head only: a shadow root's @font-face is ignored
 pn.state.notifications.position = "bottom-left"  # over the sidebar's lower part, not over the plots
 # One recomputation of the document's model graph (a walk of every model) when the page is built,

@@ -30,7 +30,8 @@ def test_opens_on_the_first_view_and_a_slider_updates_the_plots(page):
     assert page.page.locator("h2:visible").first.inner_text() == SCENES["modulated"].title
     assert ["steps", "10,000", "10,000"] in page.numbers()
     expect(page.page.locator("p.verdict")).to_contain_text("rk4 drifts, midpoint does not")
-    assert page.page.evaluate("window.cosymp_bokeh_reads") is True, "app/static/bokeh_reads.js did not apply"
+    assert page.page.evaluate("[window.cosymp_bokeh_reads, window.cosymp_bokeh_layouts]") == [True, True], \
+        "app/static/bokeh_reads.js or bokeh_layouts.js did not apply"
     page.page.wait_for_function("() => [...document.fonts].some((f) => f.family.replaceAll('\"', '') === "
                                 "'cosymp-KaTeX_Main' && f.status === 'loaded')", timeout=10_000)
     assert not page.page.evaluate("[...document.fonts].filter((f) => f.status === 'error').map((f) => f.family)")

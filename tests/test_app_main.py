@@ -1,7 +1,7 @@
 """The served page (app/main.py) composed in-process, without a server or a browser."""
 import panel as pn
 
-from app import main
+from app import main, page
 from app.features import FEATURES
 
 
@@ -49,7 +49,7 @@ def test_the_bokeh_reads_shim_still_matches_bokehjs_and_no_css_sets_bk_variables
     sources = [*root.glob("assets/*.css"), *root.glob("app/**/*.py"), *root.glob("app/**/*.js")]
     assert sources and not [p for p in sources if re.search(r"--bk-[a-z]", p.read_text())], \
         "a --bk-* CSS variable would be ignored by the figures (app/static/bokeh_reads.js)"
-    assert (root / main.BOKEH_READS).is_file()
+    assert all((root / path).is_file() for path in page.SCRIPTS.values())
 
 
 def test_the_equations_get_katexs_stylesheet_and_every_font_it_names():
@@ -86,7 +86,7 @@ def test_components_get_bootstraps_reboot_and_the_page_the_whole_of_bootstrap():
     from bokeh.document import Document
 
     whole = (Path(panel.__file__).parent / "dist" / "bundled" / "bootstrap5" / "css" / "bootstrap.min.css").read_text()
-    reboot = (Path(main.__file__).resolve().parent.parent / main.REBOOT).read_text()
+    reboot = (Path(main.__file__).resolve().parent.parent / page.REBOOT).read_text()
     section = reboot[reboot.index("*/") + 2:].strip()
     assert section.startswith("*,::after,::before{box-sizing:border-box}") and section in whole, \
         "Panel bundles another Bootstrap: extract its Reboot section again"
@@ -94,5 +94,77 @@ def test_components_get_bootstraps_reboot_and_the_page_the_whole_of_bootstrap():
     template = main.App().template()
     doc = template.server_doc(Document())
     urls = [s.url for m in doc.models if hasattr(m, "stylesheets") for s in m.stylesheets if hasattr(s, "url")]
-    assert main.REBOOT in urls and not [u for u in urls if u.endswith("bootstrap.min.css")]
+    assert page.REBOOT in urls and not [u for u in urls if u.endswith("bootstrap.min.css")]
     assert any("bootstrap.min.css" in str(u) for u in template.resolve_resources()["css"].values())
+
+
+def test_panel_handles_a_change_at_once_and_sends_what_it_causes_in_one_message():
+    """app/page.adjust_panel: Panel's 50 ms wait before handling a change from the page is gone, and
+    its handling runs under one hold (one message). Applied once per server, however many pages run
+    main.py; and only useful while Panel still waits `_debounce` and handles a change in
+    `_change_event`: when a Panel release changes either, this says so."""
+    import inspect
+
+    from panel.reactive import Syncable
+
+    page.adjust_panel()
+    page.adjust_panel()
+    assert Syncable._debounce == 0
+    assert Syncable._change_event.cosymp and not getattr(Syncable._change_event.__wrapped__, "cosymp", False)
+    assert "self._debounce" in inspect.getsource(Syncable._server_change), "Panel no longer debounces this way"
+    assert "self._change_event(doc)" in inspect.getsource(Syncable._change_coroutine)
+
+
+def test_the_design_is_computed_once_per_component_class_and_handed_out_as_copies():
+    theme = page.Design().theme
+    first, _ = page.Design._get_modifiers(pn.widgets.Button(name="x"), theme)
+    first["stylesheets"].append("changed.css")
+    second, _ = page.Design._get_modifiers(pn.widgets.Button(name="y"), theme)
+    assert "changed.css" not in second["stylesheets"] and page.REBOOT in second["stylesheets"]
+    assert len([k for k in page.Design._modifiers if k[0] is pn.widgets.Button]) == 1
+
+
+def test_a_data_update_does_not_walk_the_model_graph_and_a_new_model_is_attached_once():
+    """plotting.deferred_graph: Bokeh's freeze() walks every model of the page when it ends; a data
+    update changes no reference and needs no walk, a new range does and gets one, at the end."""
+    from bokeh.document import Document
+    from bokeh.models import Range1d
+
+    from app import plotting
+
+    doc = Document()
+    fig = plotting.figure("t")
+    src = plotting.source()
+    fig.line("x", "y", source=src)
+    doc.add_root(fig)
+    walks = []
+    recompute = doc.models.recompute
+    doc.models.recompute = lambda: (walks.append(1), recompute())
+    with plotting.deferred_graph(doc):
+        src.data = {"x": [1.0, 2.0], "y": [3.0, 4.0]}
+    assert walks == []
+    new = Range1d(0, 1)
+    with plotting.deferred_graph(doc):
+        fig.x_range = new
+        fig.y_range = Range1d(0, 2)
+        assert doc.models.get_by_id(new.id) is None, "deferred until the end"
+    assert walks == [1] and doc.models.get_by_id(new.id) is new and "invalidate" not in vars(doc.models)
+
+
+def test_the_layouts_shim_still_matches_bokehjs():
+    """app/static/bokeh_layouts.js defers a root's layout while a message is applied. It relies on
+    LayoutDOMView.invalidate_layout handing the request up to the root, which lays out the page at
+    once, and on Document.apply_json_patch applying a message: when a Bokeh release changes either,
+    this says so."""
+    import re
+    from pathlib import Path
+
+    import bokeh
+
+    js = (Path(bokeh.__file__).parent / "server" / "static" / "js" / "bokeh.js").read_text()
+    assert re.search(r"invalidate_layout\(\) \{\s*// TODO[^\n]*\n[^\n]*\n\s*if \(this\.parent instanceof "
+                     r"LayoutDOMView\) \{\s*this\.parent\.invalidate_layout\(\);\s*\}\s*else \{\s*"
+                     r"this\.update_layout\(\);\s*this\.compute_layout\(\);", js), \
+        "BokehJS lays out differently: revisit app/static/bokeh_layouts.js"
+    assert re.search(r"apply_json_patch\(patch, buffers = new Map\(\)\) \{", js)
+    assert '"models/layouts/layout_dom":' in js and '"document/document":' in js

@@ -39,7 +39,7 @@ through Playwright's async API (one event loop, the pages work at once):
 Latency is timed inside each page on the page's own clock (performance.now()), so the Python side
 serving 11 pages does not enter it: the move is the keydown event, "update" the first change a
 server patch makes to a ColumnDataSource of the page's Bokeh document after it (the plots got the
-new data), "settled" the session's busy spinner hidden again (every plot of the move delivered).
+new data), "settled" the session's busy spinner hidden again (its style) (every plot of the move delivered).
 This is more reliable than timing websocket frames from Python: the first PATCH-DOC after a move
 is the URL echo of the location sync, which says nothing about the plots, and frame events reach
 a Python loop shared by 11 pages late. A move counts as received when its update arrives; gamma
@@ -284,7 +284,8 @@ INSTRUMENT_JS = """() => {
         const t = performance.now();
         if (m.type === "ColumnDataSource") L.cds.push(t);
         else if (m.type === "Slider" && ev.attr === "value") L.slider.push([t, m.value]);
-        else if (ev.attr === "visible" && m.visible === false && (m.css_classes || []).includes("loader"))
+        else if (ev.attr === "styles" && (m.css_classes || []).includes("loader")
+                 && (m.styles || {}).visibility === "hidden")
             L.settled.push(t);
     });
     return Bokeh.documents.length;

@@ -1,0 +1,71 @@
+"""The page's plumbing: Panel and BokehJS adjusted so that a live page answers at once.
+
+Each adjustment names what it saves; tests/test_app_main.py fails when a Panel or Bokeh release
+changes what one relies on.
+"""
+import functools
+from typing import ClassVar
+
+import panel as pn
+from panel.io.document import unlocked
+from panel.io.state import set_curdoc
+from panel.reactive import Syncable
+from panel.theme import Bootstrap
+
+REBOOT = "app/static/bootstrap_reboot.css"  # Bootstrap's Reboot section, verbatim (see Design)
+# BokehJS adjusted in the page (served from app/static by the server; see each file).
+SCRIPTS = {"cosymp_bokeh_reads": "app/static/bokeh_reads.js", "cosymp_bokeh_layouts": "app/static/bokeh_layouts.js"}
+
+
+class Design(Bootstrap):
+    """Panel's Bootstrap design with Bootstrap's Reboot (its element defaults: 81 rules) in each
+    component's shadow root instead of the whole of bootstrap.min.css (2,490 rules; no other rule of
+    it matches an element there). The page keeps the whole sheet. Panel renders each component in
+    a shadow root with its own copy of the design's sheets, and a style recalculation matches every
+    element of a root against all of its rules: with the whole sheet, each of the many that BokehJS
+    forces by reading the layout back cost 1-3 ms, and a scene change a third of its time."""
+
+    _modifiers: ClassVar[dict] = {}
+
+    @classmethod
+    def _get_modifiers(cls, viewable, theme=None, isolated=True):
+        """Memoized: they depend only on the component's class, the theme, isolation and whether a
+        server runs, yet Panel recomputes them (a filesystem check per stylesheet path) on every
+        property a component sends, about 20 ms of each scene change."""
+        doc = pn.state.curdoc
+        key = (type(viewable), type(theme) if isinstance(theme, pn.theme.Theme) else theme, isolated,
+               bool(doc is not None and doc.session_context))
+        if key not in cls._modifiers:
+            modifiers, children = super()._get_modifiers(viewable, theme, isolated)
+            whole = set(cls._resources["css"].values())
+            if "stylesheets" in modifiers:
+                modifiers["stylesheets"] = [REBOOT if s in whole else s for s in modifiers["stylesheets"]]
+            cls._modifiers[key] = (modifiers, children)
+        modifiers, children = cls._modifiers[key]
+        # Copies: Panel replaces the stylesheets of what it gets with its documents' sheet models.
+        return ({k: list(v) if isinstance(v, list) else v for k, v in modifiers.items()},
+                {k: list(v) if isinstance(v, list) else v for k, v in children.items()})
+
+
+def in_one_message(change_event):
+    """Panel's handling of a change from the page, with every model change it causes sent in one
+    message: Panel sent one per component (a scene change: the h and T boxes, the controls, each
+    equation...), and BokehJS lays out the whole page after each message that changes a layout."""
+
+    @functools.wraps(change_event)
+    def handled(self, doc):
+        with set_curdoc(doc), unlocked():
+            change_event(self, doc)
+
+    handled.cosymp = True
+    return handled
+
+
+def adjust_panel():
+    """Panel's handling of the page's events, for this server process (once; each page runs main.py):
+    a change is handled at once, not 50 ms later (Panel waits that long for more changes of the same
+    widget to merge; each computation here merges the changes made while it runs), and what it
+    causes reaches the page in one message."""
+    Syncable._debounce = 0
+    if not getattr(Syncable._change_event, "cosymp", False):
+        Syncable._change_event = in_one_message(Syncable._change_event)
