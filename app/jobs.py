@@ -15,6 +15,7 @@ states are testable in a plain Python session.
 """
 import asyncio
 import dataclasses
+import functools
 import math
 import threading
 import time
@@ -26,6 +27,9 @@ from cosymp.errors import InputError, RunError
 from . import memory
 
 PROGRESS_S = 0.25  # progress reaches the page at most this often
+# Quick results (Job.quick) reach the page at most this often: a burst of changes (a slider moved by
+# the arrow keys) asked for one each, and the page drew them one after the other, about 50 ms apiece.
+QUICK_GAP_S = 0.1
 
 # What a computation may raise besides cosymp's own errors (InputError is a ValueError, RunError a
 # RuntimeError): each becomes a message and the session goes on.
@@ -155,16 +159,31 @@ class Job(param.Parameterized):
         self._done = 0
         self._closed = False
         self._held = None
+        self._last_quick = -math.inf
         self.run = None
 
     # ---- requests
 
     def request(self):
-        """Compute from the current inputs, after the computation under way (the latest wins)."""
+        """Compute from the current inputs, after the computation under way (the latest wins); at once,
+        in this thread, when none is under way and this one is quick (`quick()`)."""
         self._wanted += 1
-        if not self.running and not self._closed:
+        if self.running or self._closed:
+            return
+        quick = self.quick()
+        wait = self._last_quick + QUICK_GAP_S - time.perf_counter()
+        if quick and wait <= 0:
+            self._last_quick = time.perf_counter()
+            self._now()
+        else:
             self.running = True
-            param.parameterized.async_executor(self._drain)
+            param.parameterized.async_executor(functools.partial(self._drain, wait if quick else 0.0))
+
+    def quick(self):
+        """Whether the computation the inputs ask for is expected to take so little (a few tens of ms)
+        that it runs in the handler of the change that asked for it: its results then reach the page
+        in the same message as the change's other effects, and the page is laid out once, not twice."""
+        return False
 
     def start(self):
         """Start a computation unless one is running (a button's action)."""
@@ -187,6 +206,9 @@ class Job(param.Parameterized):
     def refresh(self):
         """Compute from the current inputs now, in this thread (a page's first results)."""
         self._wanted += 1
+        self._now()
+
+    def _now(self):
         target = self._wanted
         run = self._begin()
         if run is not None:
@@ -200,8 +222,10 @@ class Job(param.Parameterized):
 
     # ---- the loop side
 
-    async def _drain(self):
+    async def _drain(self, wait=0.0):
         try:
+            if wait > 0:  # quick results came moments ago: changes made meanwhile are merged into one
+                await asyncio.sleep(wait)
             while self._done < self._wanted and not self._closed:
                 target = self._wanted
                 run = self._begin()

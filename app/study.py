@@ -17,16 +17,16 @@ from functools import cache
 import panel as pn
 import param
 
-from cosymp.diagnostics import relative_error
 from cosymp.errors import InputError
 from cosymp.integrate import Setup, check_step, default_stride
 from cosymp.methods import METHODS
-from cosymp.reference import fine_steps, reference_final
+from cosymp.reference import fine_steps, reference_states
 from cosymp.report import render
 from cosymp.report.scene import command as report_command
 from cosymp.report.scene import scene_report
 from cosymp.scenes import SCENES
 from cosymp.study import compare_until_failure as study_until_failure
+from cosymp.study import with_reference
 
 from .jobs import Job, Note
 from .plotting import equation, note, push
@@ -34,6 +34,8 @@ from .presets import HARD, PAPER, PRESETS, URL_NAMES, rounded
 from .warmup import FIRST_VIEW
 
 LIVE_MAX_STEPS = 2_000_000
+QUICK_S = 0.03  # a comparison expected to take at most this long is computed in the change's handler
+SECONDS_PER_STEP = {}  # (scene, method, other) -> what its last comparison in this server took per step
 LIVE_REFERENCE_STEPS = 200_000  # a fine rk8 reference for the final error takes at most this many steps (~0.1 s)
 CLOUD_POINTS = {True: 32, False: 64}
 DELTA = 1e-4
@@ -44,7 +46,8 @@ BYTES_PER_RECORDED = 48
 
 def comparison_bytes(setups, h, T):
     """Peak memory of comparing the setups (study.compare: 2n + 2 members with increments, and
-    their tangent maps), from the values the runs record."""
+    their tangent maps), from the values the runs record, and of their reference run (one state
+    per step h) where one is computed."""
     steps = check_step(h, T)
     total = 0
     for s in setups:
@@ -52,6 +55,8 @@ def comparison_bytes(setups, h, T):
         members = m + 2
         records = steps // default_stride(steps, members, m, increments=True) + 1
         total += records * members * (m + 1)
+    if setups and takes_reference(setups[0], h, T):
+        total += (steps + 1) * (2 * setups[0].scene.ndof + 1)
     return BYTES_PER_RECORDED * total
 
 
@@ -98,23 +103,24 @@ def compare_until_failure(setup, h, T):
     return study_until_failure(setup, h, T, delta=DELTA, cloud_points=CLOUD_POINTS[setup.scene.kernel.linear])
 
 
+def takes_reference(setup, h, T):
+    """Whether a comparison of setup measures its errors against a reference run: where the scene
+    has no exact flow and the run (rk8 at a fine step, as in the report) takes at most
+    LIVE_REFERENCE_STEPS steps."""
+    return not setup.scene.has_flow and fine_steps(setup, h, T) <= LIVE_REFERENCE_STEPS
+
+
 def live_reference(setup, h, T):
-    """The state at T a scene without an exact flow measures the final error against, as the
-    report does (rk8 at a fine step), when that takes at most LIVE_REFERENCE_STEPS steps; else None."""
-    if setup.scene.has_flow or fine_steps(setup, h, T) > LIVE_REFERENCE_STEPS:
-        return None
-    return reference_final(setup, h, T, uncertainty=False)[0][0]
+    """(states at every multiple of h, label) of the reference the scene's errors are measured
+    against (`takes_reference`), or None."""
+    return reference_states(setup, h, T) if takes_reference(setup, h, T) else None
 
 
-def final_error(comparison, failure, z_ref):
-    """The relative error at T: the exact flow's (in the comparison), or against z_ref."""
-    if comparison is None or failure:
+def final_error(comparison, failure):
+    """The relative error at T, against the exact flow or the reference run; None without either."""
+    if comparison is None or failure or comparison.error is None:
         return None
-    if comparison.error is not None:
-        return float(comparison.error[-1])
-    if z_ref is None:
-        return None
-    return relative_error(comparison.run.z[-1, 0], z_ref)[0]
+    return float(comparison.error[-1])
 
 
 def run_pair(scene, setups, h, T):
@@ -122,13 +128,15 @@ def run_pair(scene, setups, h, T):
     with ThreadPoolExecutor(len(setups) + 1) as pool:
         reference = pool.submit(live_reference, setups[0], h, T)
         done = list(pool.map(lambda s: compare_until_failure(s, h, T), setups))
-        z_ref = reference.result()
+        reference = reference.result()
     entries = []
     for s, (comparison, failure) in zip(setups, done):
         label = s.method.label(s.theta)
         if any(e.label == label for e in entries):
             label += " (2)"
-        entries.append(Entry(label, s.method.name, comparison, failure, final_error(comparison, failure, z_ref)))
+        if comparison is not None and reference is not None:
+            comparison = with_reference(comparison, reference[0], h, reference[1])
+        entries.append(Entry(label, s.method.name, comparison, failure, final_error(comparison, failure)))
     return Runs(scene, h, T, tuple(entries))
 
 
@@ -341,8 +349,19 @@ class Study(Job):
         if note_:
             self.say(note_)
 
+    def quick(self):
+        """Whether the last comparison of this scene and pair of methods in this server, scaled to this
+        many steps, took at most QUICK_S (a comparison's cost per step depends on little else)."""
+        rate = SECONDS_PER_STEP.get((self.scene, self.method, self.other))
+        try:
+            return rate is not None and rate * check_step(self.h, self.T) <= QUICK_S
+        except InputError:
+            return False
+
     def _done_in(self, inputs, elapsed):
-        """A live comparison keeps no status line."""
+        """A live comparison keeps no status line; its cost per step is noted (`quick`)."""
+        scene, setups, h, T, _ = inputs
+        SECONDS_PER_STEP[(scene, *(s.method.name for s in setups))] = elapsed / check_step(h, T)
 
 
 def study_report(study):
@@ -415,7 +434,8 @@ class SceneControls(pn.viewable.Viewer):
                 if k not in kinds[i]:
                     kinds[i].append(k)
         self.pool = [{k: k() for k in kinds[i]} for i in range(len(kinds))]
-        self._column = pn.Column(*[c.layout for at in self.pool for c in at.values()],
+        self._glossary = note("", margin=(0, 5))
+        self._column = pn.Column(*[c.layout for at in self.pool for c in at.values()], self._glossary,
                                  sizing_mode="stretch_width", margin=0)
         self._bind(self.study.inputs)
         self.study.param.watch(lambda e: push(lambda: self._bind(e.new)), "inputs")  # one message
@@ -436,6 +456,15 @@ class SceneControls(pn.viewable.Viewer):
                     control.bind(inputs, names[i])
                 else:
                     control.unbind()
+        self._glossary.object = glossary(inputs, names)
+
+
+def glossary(inputs, names):
+    """What each of the scene's parameters means, below its controls (as text: a widget's tooltip
+    is a new model each time it changes, and new models cost each scene change a walk of the whole
+    page's model graph, about 35 ms)."""
+    items = "".join(f"<li><b>{html.escape(n)}</b>: {html.escape(inputs.param[n].doc or '')}</li>" for n in names)
+    return f"<details class='params'><summary>What the parameters mean</summary><ul>{items}</ul></details>"
 
 
 class Control:
@@ -496,7 +525,7 @@ class NumberControl(Control):
         if name != self.name:
             lo, hi = p.softbounds
             self.slider.param.update(label=p.label, start=min(lo, v), end=max(hi, v), step=p.step, value=v)
-            self.box.param.update(value=v, description=p.doc)
+            self.box.value = v
         elif math.isfinite(v):
             self.slider.param.update(start=min(self.slider.start, v), end=max(self.slider.end, v), value=v)
             self.box.value = v
@@ -510,9 +539,8 @@ class TextControl(Control):
         self.widget.param.watch(lambda e: self.take(e.new), "value")
 
     def show(self, inputs, name):
-        p = inputs.param[name]
         self.widget.param.update(label=f"{name}(t): 'paper', 'constant' or an expression of t",
-                                 description=p.doc, value=getattr(inputs, name))
+                                 value=getattr(inputs, name))
 
 
 class ChoiceControl(Control):
@@ -523,8 +551,7 @@ class ChoiceControl(Control):
 
     def show(self, inputs, name):
         p = inputs.param[name]
-        self.widget.param.update(label=p.label, description=p.doc, options=list(p.objects),
-                                 value=getattr(inputs, name))
+        self.widget.param.update(label=p.label, options=list(p.objects), value=getattr(inputs, name))
 
 
 class SceneInfo(pn.viewable.Viewer):

@@ -29,6 +29,18 @@ def fine_steps(setup, h, T):
     return check_step(h, T) * max(1, math.ceil(h / (REFERENCE_FRACTION * setup.scene.time_scale)))
 
 
+def reference_states(setup, h, T, z0=None):
+    """(states, label) of a fine rk8 run of setup's scene and parameters from z0 (the scene's
+    initial condition by default), at every multiple of h up to the run's final time steps*h:
+    states (steps + 1, 2n), its step h/k no larger than 2% of the scene's time scale; label says
+    which reference it is. For the scenes without an exact flow."""
+    steps = check_step(h, T)
+    check_reference(setup, steps * h)
+    k = fine_steps(setup, h, T) // steps
+    run = simulate(Setup.make(setup.scene, "rk8", setup.values), h / k, steps * h, z0=z0, stride=k)
+    return run.z[:, 0], f"rk8 at h/{k}" if k > 1 else "rk8 at h"
+
+
 def reference_final(setup, h, T, z0=None, uncertainty=True):
     """(z at the run's final time steps*h, uncertainty) for a run of setup with step h to T.
 

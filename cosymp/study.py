@@ -4,6 +4,7 @@
 the paper's estimators and, optionally, a small loop of initial conditions (the carried
 cloud), all in one compiled loop, and derives every diagnostic of PHYSICS.md section 4.
 """
+import dataclasses
 import time
 from dataclasses import dataclass
 
@@ -37,7 +38,8 @@ class Comparison:
     paper_omega, paper_volume: the paper's estimators from one-step increments (as printed).
     separation_omega: omega(z1 - z0, z2 - z0) / delta^2 (1 for a symplectic map).
     cloud, cloud_area: the carried loop and its enclosed area over its initial area.
-    error: the relative error |z - z_exact| / |z_exact| where the scene has an exact flow, else None.
+    error: the relative error |z - z_ref| / |z_ref| against the exact flow where the scene has one,
+        or against a reference run given to `with_reference`; else None. against: which of them.
     Pi: mechanical momentum of the trajectory (charged scene), else None.
     """
 
@@ -53,6 +55,7 @@ class Comparison:
     error: np.ndarray
     Pi: np.ndarray
     wall_s: float
+    against: str = None
 
     @property
     def summary(self):
@@ -106,7 +109,16 @@ def compare(setup, h, T, delta=1e-4, cloud_points=0, cloud_radius=0.05, stride=N
         Pi = charged.mechanical(setup.P, run.t, run.q[:, 0], run.p[:, 0])
     return Comparison(setup, run, det_deviation(M), symplecticity_defect(M), paper_symplectic_form(run),
                       paper_volume_form(run), separation_omega(run) / delta ** 2, cloud, area, error, Pi,
-                      time.perf_counter() - start)
+                      time.perf_counter() - start, "the exact flow" if error is not None else None)
+
+
+def with_reference(comparison, states, h, label):
+    """The comparison with its error measured against a reference run's states at every multiple
+    of h (`reference.reference_states`): for the scenes without an exact flow."""
+    run = comparison.run
+    z_ref = states[np.rint(run.t / h).astype(np.int64)]
+    error = distance(run.z[:, 0], z_ref) / np.maximum(norm(z_ref), np.finfo(float).tiny)
+    return dataclasses.replace(comparison, error=error, against=label)
 
 
 def compare_until_failure(setup, h, T, **options):

@@ -80,7 +80,11 @@ def test_the_final_error_without_an_exact_flow_is_the_reports_and_the_verdict_sa
     assert midpoint.final_error > 10 * rk4.final_error
     assert f"Its final error is the larger, though ({midpoint.final_error:.2g} against {rk4.final_error:.2g})" \
         in common.verdict(s.results)
-    assert "against rk8 at a fine step" in orbits.remark(s.results)
+    assert "the errors are measured against a reference run, rk8 at h" in orbits.remark(s.results)
+    figs = shown_figures(drawn(orbits.OrbitsView(s)))
+    assert plotted(figs.error).size > 0 and "against rk8 at h" in figs.error.fig.title.text
+    for e in s.results.entries:
+        assert e.comparison.error[0] == 0.0 and e.comparison.error[-1] == e.final_error
     assert "Nothing bounds it over longer runs" in common.verdict(s.results), "no claim the data do not show"
     s.T = 1e4  # 2e6 steps at h 0.005: its reference would be too long for a live view
     assert all(e.final_error is None for e in s.results.entries) and "Its final error" not in common.verdict(s.results)
@@ -128,34 +132,44 @@ def test_switching_scenes_rebinds_the_controls_and_rebuilds_the_portraits():
     assert isinstance(shown[6], study.ChoiceControl) and shown[6].widget.options == list(
         next(p for p in SCENES["charged"].params if p.name == "gauge").choices)
     assert shown[2].slider.label == "B0" and shown[2].slider.value == s.inputs.B0 == 0.05
-    assert [o.visible for o in column] == [True] * len(names)
+    assert [o.visible for o in column[:-1]] == [True] * len(names)
+    assert column[-1].object.count("<li>") == len(names) and "<b>beta</b>: beta(t): &#x27;paper&#x27;" in column[-1].object
     assert s.results.scene == "charged" and not s.results.dense
     assert len(common.phase_axes("charged")) == 3
-    assert view._shown == ("charged", False, False) and len(view.grid.objects) == 4
+    assert view._shown == ("charged", False, False) and len(shown_figures(view).grid.objects) == 5
+    assert [g.visible for g in view.grids] == [False, True], "damped's figures hidden, not rebuilt"
     portraits = shown_figures(view).portraits
     assert [f.title.text for _, f, _ in portraits] == [t for *_, t in common.phase_axes("charged")]
     s.scene = "damped"
-    assert [o.visible for o in column] == [True] * 5 + [False] * (len(names) - 5)
+    assert [o.visible for o in column[:-1]] == [True] * 5 + [False] * (len(names) - 5)
+    assert column[-1].object.count("<li>") == 5 and "<b>gamma</b>: gamma &gt; 0 grows q" in column[-1].object
     assert [c.labelled.label for c in pool if not c.layout.visible] == [""] * (len(names) - 5)
 
 
 def test_scenes_of_one_shape_share_the_portraits_relabelled_with_fresh_ranges():
+    """Each shape's figures join the page once and are then shown or hidden; a scene change relabels
+    them and tells the page to follow the new data again (a counter in the figure's tags, which a
+    CustomJS on it turns into a reset of its ranges), without new range models. Every scene of one
+    degree of freedom has the same three figures (its error against the exact flow or the reference
+    run), so a change among them shows or hides nothing."""
     s = Study(scene="damped")
     view = drawn(orbits.OrbitsView(s))
     figs = shown_figures(view)
     fig = figs.portraits[0][1]
-    first = fig.x_range
-    s.scene = "modulated"
-    assert shown_figures(view) is figs and fig.x_range is not first, "the same figures, not the zoom"
-    assert list(view.grid.objects) == figs.panes[:-1], "no error plot without an exact flow"
-    s.scene = "decaying"
-    assert shown_figures(view) is figs and list(view.grid.objects) == figs.panes
-    assert fig.yaxis.axis_label == "p" and "phase portrait" in fig.title.text
+    ranges, tags = (fig.x_range, fig.y_range), list(fig.tags)
+    assert [c.code for c in fig.js_property_callbacks["change:tags"]] == [plotting.RESET_RANGES]
+    assert len(figs.grid.objects) == 3 and "against the exact flow" in figs.error.fig.title.text
+    for scene in ("decaying", "modulated", "kapitza"):
+        tags = list(fig.tags)
+        s.scene = scene
+        assert shown_figures(view) is figs and (fig.x_range, fig.y_range) == ranges and fig.tags != tags
+        assert fig.yaxis.axis_label == "p" and "phase portrait" in fig.title.text and len(view.grids) == 1
+    assert "against rk8 at h" in figs.error.fig.title.text and plotted(figs.error).size > 0
     s.scene = "charged"
-    assert shown_figures(view) is not figs and fig.title.text == f"phase portrait: {common.PORTRAIT_MARKS}"
-    s.scene = "kapitza"
-    assert shown_figures(view) is figs and plotted(figs.portraits[0][2]).size > 0
-    assert list(view.grid.objects) == figs.panes[:-1]
+    assert fig.title.text == f"phase portrait: {common.PORTRAIT_MARKS}" and len(view.grids) == 2
+    assert [g.visible for g in view.grids] == [False, True] and len(shown_figures(view).grid.objects) == 5
+    s.scene = "damped"
+    assert shown_figures(view) is figs and [g.visible for g in view.grids] == [True, False]
 
 
 def test_a_number_control_follows_its_parameter_both_ways_and_widens_to_typed_values():
@@ -437,7 +451,7 @@ def test_long_run_in_chunks_matches_the_one_shot_run_and_can_be_cancelled():
         H = e.comparison.run.H_ext[1:, 0]
         assert d["H_max"].max() == pytest.approx(H.max(), rel=1e-6, abs=1e-12)
         assert d["det"].max() == pytest.approx(e.comparison.det_dev.max(), rel=1e-6, abs=1e-15)
-    lr2 = longrun.LongRun(s, T_long=2e5)
+    lr2 = longrun.LongRun(s, T_long=5e6)  # 5e7 steps: seconds, so that a progress report (each 0.25 s) comes first
     lr2.param.watch(lambda e: lr2.cancel(), "progress")
     lr2.start()
     assert lr2.status.startswith("cancelled") and 0 < lr2.progress < 1

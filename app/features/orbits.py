@@ -27,15 +27,16 @@ def apart(runs):
 
 
 def shape(scene, dense, split):
-    """What a layout's figures depend on: scenes of one shape share them, relabelled (a new figure
-    costs the server 10-20 ms and the browser a layout of the page)."""
+    """What a layout's figures depend on: scenes of one shape share them, relabelled (new figures
+    cost the server 10-20 ms each, and figures shown or hidden the browser a layout of the page)."""
     return len(phase_axes(scene)), dense, split
 
 
 class Figures:
     """The figures of one layout shape: the portraits (lines, or rasters when dense; one per
-    method when their sizes are far apart), max |H~| per bin and the error (shown for scenes with
-    an exact flow). `label(scene)` titles them for a scene."""
+    method when their sizes are far apart), max |H~| per bin and the relative error (against the
+    exact flow or the reference run; empty where there is neither). `label(scene)` titles them for
+    a scene."""
 
     def __init__(self, portraits, dense, split):
         self.split = split
@@ -48,8 +49,9 @@ class Figures:
                 self.portraits.append((slot, fig, Raster(fig) if dense else Pair(fig, start=True)))
                 self.tails.append(Pair(fig, width=3.2, emphasis=True))
         self.energy = Pair(figure("max |H + p_t| per bin (exact: 0)", "t", "|H + p_t|", logy=True))
-        self.error = Pair(figure("relative error |z − z_exact| / |z_exact|", "t", "relative error", logy=True))
-        self.panes = [pane(f) for f in [f for _, f, _ in self.portraits] + [self.energy.fig, self.error.fig]]
+        self.error = Pair(figure("relative error |z − z_ref| / |z_ref|", "t", "relative error", logy=True))
+        figs = [f for _, f, _ in self.portraits] + [self.energy.fig, self.error.fig]
+        self.grid = grid(*[pane(f) for f in figs], ncols=3 if len(figs) in (3, 6) else 2)
 
     def label(self, scene):
         """Titles and axis labels for the scene's portraits, and fresh ranges for its data."""
@@ -61,7 +63,6 @@ class Figures:
             fig.title.text = title if slot is None else f"{slot}: {title}"
             fig.xaxis.axis_label, fig.yaxis.axis_label = xl, yl
         self.reset()
-        self.shown = self.panes if SCENES[scene].has_flow else self.panes[:-1]
 
     def update(self, runs):
         cs = comparisons(runs)
@@ -78,9 +79,11 @@ class Figures:
         # From the first step: H + p_t is 0 by construction at t = 0, and drawn at FLOOR it stretched
         # the log axis over a dozen empty decades.
         self.energy.set({slot: peaks(c.run.t[1:], np.abs(c.run.H_ext[1:, 0])) for slot, c in cs.items()})
-        if SCENES[runs.scene].has_flow:
-            self.error.colors(names(runs))
-            self.error.set(over_time(runs, lambda c: (c.run.t[1:], c.error[1:]), logy=True))  # 0 at t = 0
+        against = next((c.against for c in cs.values() if c.against), None)
+        self.error.fig.title.text = f"relative error |z − z_ref| / |z_ref|, against {against or 'no reference'}"
+        self.error.colors(names(runs))
+        self.error.set(over_time(runs, lambda c: (c.run.t[1:], c.error[1:]) if c.error is not None else (None, None),
+                                 logy=True))  # 0 at t = 0
 
     def reset(self):
         for _, fig, _ in self.portraits:
@@ -90,14 +93,16 @@ class Figures:
 
 
 def remark(runs):
-    """Where the final relative error comes from, for a scene without an exact flow."""
+    """What the errors of a scene without an exact flow are measured against."""
     if SCENES[runs.scene].has_flow:
         return ""
-    missing = any(e.final_error is None and not e.failure for e in runs.ok)
-    where = (f"its reference would take more than {LIVE_REFERENCE_STEPS:.0e} rk8 steps here, so the report or "
-             "<code>cosymp run</code> measure it" if missing else "the table's final relative error is against rk8 "
-             "at a fine step, as in the report")
-    return f"<p class='doc'>No closed-form flow for '{runs.scene}', so no error plot; {where}.</p>"
+    against = next((e.comparison.against for e in runs.ok if e.comparison.against), None)
+    if against is None:
+        return (f"<p class='doc'>No closed-form flow for '{runs.scene}', and its reference would take more than "
+                f"{LIVE_REFERENCE_STEPS:.0e} rk8 steps here: no error plot; the report or <code>cosymp run</code> "
+                "measure the final error.</p>")
+    return (f"<p class='doc'>No closed-form flow for '{runs.scene}': the errors are measured against a reference "
+            f"run, {against} (as in the report).</p>")
 
 
 class OrbitsView(FeatureView):
@@ -107,11 +112,11 @@ class OrbitsView(FeatureView):
         self._figures = {}
         self._shown = None
         self.key = note("")
-        self.grid = grid()
+        self.grids = pn.Column(sizing_mode="stretch_width", margin=0)
         self.remark = note("")
         self.table = table([""])
         self.follow(self.study, "results")
-        return pn.Column(self.key, self.grid, self.remark, note(NUMBERS_TEXT), self.table,
+        return pn.Column(self.key, self.grids, self.remark, note(NUMBERS_TEXT), self.table,
                          sizing_mode="stretch_width")
 
     def update(self):
@@ -120,13 +125,13 @@ class OrbitsView(FeatureView):
             return
         which = (runs.scene, runs.dense, apart(runs))
         figs = self._figures.get(shape(*which))
-        if figs is None:
+        if figs is None:  # a shape's figures join the page once, then are shown or hidden
             figs = self._figures[shape(*which)] = Figures(*shape(*which))
+            self.grids.append(figs.grid)
         if self._shown is None or self._shown[0] != runs.scene or figs.scene != runs.scene:
             figs.label(runs.scene)
-        if figs.shown != list(self.grid.objects):
-            self.grid.ncols = 3 if len(figs.shown) in (3, 6) else 2
-            self.grid.objects = list(figs.shown)
+        for other in self._figures.values():
+            other.grid.visible = other is figs
         self._shown = which
         self.remark.object = remark(runs)
         figs.update(runs)
