@@ -337,12 +337,15 @@ def vline(fig, color="#868e96"):
 
 
 def push(update):
-    """Run update() (which changes Bokeh models) so that its changes reach the page as one message:
-    under a server from the session's loop (before the page has loaded, in a callback that holds
-    the document's lock), without one directly. The document's model graph is recomputed once, at
-    the end, and only if a change asked for it (`deferred_graph`)."""
+    """Run update() (which changes Bokeh models) so that its changes reach the page as one message.
+    While a page's document is being built its changes are simply in it: its first figures arrive
+    with their data (they were sent empty and filled by a second message, drawn twice). Later, until
+    the page has loaded, from a callback on the session's loop that holds the document's lock (a
+    background run's first results). The document's model graph is recomputed once, at the end, and
+    only if a change asked for it (`deferred_graph`)."""
     doc = pn.state.curdoc
-    if doc is not None and getattr(doc, "session_context", None) is not None and not pn.state.loaded:
+    context = getattr(doc, "session_context", None)
+    if context is not None and context.session is not None and not pn.state.loaded:
         doc.add_next_tick_callback(update)
         return
     with unlocked(), (deferred_graph(doc) if doc is not None else contextlib.nullcontext()):
