@@ -7,6 +7,8 @@ import functools
 from typing import ClassVar
 
 import panel as pn
+from bokeh.resources import Resources
+from panel.io import document
 from panel.io.document import unlocked
 from panel.io.state import set_curdoc
 from panel.reactive import Syncable
@@ -61,11 +63,40 @@ def in_one_message(change_event):
     return handled
 
 
+# The BokehJS bundles the page loads: not its WebGL or MathJax ones (2 MB of the page's 5.5, about
+# 100 ms of its first load), which no figure or text of the app uses (the equations are KaTeX's;
+# tests/test_app_main.py checks that no model of the page needs them). Panel's own bundle needs the
+# tables bundle.
+BOKEH_BUNDLES = ["bokeh", "bokeh-widgets", "bokeh-tables"]
+
+
+def no_stranded_messages(dispatch_msgs):
+    """Panel's writer of the messages it queued while a page's websocket was busy, without a race
+    that left a message unsent until the page's next change (under load, a slider move's plots
+    arrived a minute late, with the next move). The writer drops the document's write flag when it
+    has written its batch; a batch queued while it wrote sets the flag and starts a second writer,
+    which finds the flag gone if the first resumed before it ran, and returns without writing. Here
+    a writer that finds messages queued writes them."""
+
+    @functools.wraps(dispatch_msgs)
+    async def dispatch(doc):
+        if document._WRITE_MSGS.get(doc):
+            document._WRITE_BLOCK[doc] = True
+        await dispatch_msgs(doc)
+
+    dispatch.cosymp = True
+    return dispatch
+
+
 def adjust_panel():
     """Panel's handling of the page's events, for this server process (once; each page runs main.py):
     a change is handled at once, not 50 ms later (Panel waits that long for more changes of the same
     widget to merge; each computation here merges the changes made while it runs), and what it
-    causes reaches the page in one message."""
+    causes reaches the page in one message. Pages load only the BokehJS bundles they use, and no
+    queued message waits for the next change to be sent."""
+    Resources._default_components = BOKEH_BUNDLES
     Syncable._debounce = 0
     if not getattr(Syncable._change_event, "cosymp", False):
         Syncable._change_event = in_one_message(Syncable._change_event)
+    if not getattr(document._dispatch_msgs, "cosymp", False):
+        document._dispatch_msgs = no_stranded_messages(document._dispatch_msgs)

@@ -168,3 +168,78 @@ def test_the_layouts_shim_still_matches_bokehjs():
         "BokehJS lays out differently: revisit app/static/bokeh_layouts.js"
     assert re.search(r"apply_json_patch\(patch, buffers = new Map\(\)\) \{", js)
     assert '"models/layouts/layout_dom":' in js and '"document/document":' in js
+
+
+def test_no_model_of_any_tab_needs_the_bokehjs_bundles_the_page_leaves_out():
+    """app/page.BOKEH_BUNDLES leaves out BokehJS's WebGL and MathJax bundles: no figure of any tab
+    draws with WebGL, no text is MathText and no HTML model holds TeX that Panel would give MathJax
+    (the equations are KaTeX's LaTeX panes)."""
+    from bokeh.document import Document
+    from bokeh.embed.bundle import _use_gl, _use_mathjax
+    from bokeh.embed.util import contains_tex_string
+    from panel.models.markup import HTML
+
+    app = main.App()
+    for f in FEATURES:
+        app.study.view = f.name
+    doc = Document()
+    app.template().server_doc(doc)
+    models = set(doc.models)
+    assert len(models) > 500 and not _use_gl(models) and not _use_mathjax(models)
+    assert not [m for m in models if isinstance(m, HTML) and not m.disable_math and contains_tex_string(m.text)]
+    assert set(page.BOKEH_BUNDLES) == {"bokeh", "bokeh-widgets", "bokeh-tables"}
+
+
+def test_a_message_queued_while_another_batch_is_written_is_still_sent():
+    """Panel's writer of queued messages (panel.io.document._dispatch_msgs): a first writer has
+    written its batch and is about to resume when a second batch is queued (a second writer
+    started); the first resumes first and drops the write flag. Panel's second writer then returned
+    without writing, and the batch waited for the page's next change; app/page's does not."""
+    import asyncio
+
+    from panel.io import document
+
+    sent = []
+
+    class Socket:
+        class write_lock:
+            class _block:
+                _value = 1
+
+    class Connection:
+        _socket = Socket()
+
+        class protocol:
+            @staticmethod
+            def create(kind, events):
+                return events
+
+    connection = Connection()
+
+    class Doc:
+        pass
+
+    doc = Doc()
+
+    async def race():
+        first = asyncio.get_running_loop().create_future()
+        futures = [first]
+        document.extra_socket_handlers[Socket] = lambda conn, msg: (sent.append(msg), [futures.pop(0)])[1]
+        document.schedule_write_events(doc, [connection], ["one"])
+        await asyncio.sleep(0)                      # the first writer writes "one" and waits for it
+        first.set_result(None)                      # written: the first writer resumes next...
+        later = asyncio.get_running_loop().create_future()
+        later.set_result(None)
+        futures.append(later)
+        document.schedule_write_events(doc, [connection], ["two"])  # ...before the second starts
+        for _ in range(5):
+            await asyncio.sleep(0)
+
+    page.adjust_panel()
+    try:
+        asyncio.run(race())
+    finally:
+        del document.extra_socket_handlers[Socket]
+        document._WRITE_MSGS.pop(doc, None)
+        document._WRITE_BLOCK.pop(doc, None)
+    assert sent == [["one"], ["two"]]
