@@ -168,7 +168,7 @@ class App(param.Parameterized):
         # Shown and hidden by its style only: a change of `visible` or of a component's classes makes
         # BokehJS lay out the whole page (Panel's own busy indicator, off below, did that on every event).
         spinner = pn.indicators.LoadingSpinner(value=True, size=24, styles=pn.bind(
-            lambda running: {"visibility": "visible" if running else "hidden"}, busy))
+            lambda running: {"opacity": "1" if running else "0"}, busy))
         download = pn.widgets.FileDownload(callback=self._report, filename="cosymp-report.html",
                                            label="Download report (HTML)", button_type="primary",
                                            sizing_mode="stretch_width")

@@ -49,7 +49,7 @@ class Figures:
                 self.portraits.append((slot, fig, Raster(fig) if dense else Pair(fig, start=True)))
                 self.tails.append(Pair(fig, width=3.2, emphasis=True))
         self.energy = Pair(figure("max |H + p_t| per bin (exact: 0)", "t", "|H + p_t|", logy=True))
-        self.error = Pair(figure("relative error |z − z_ref| / |z_ref|", "t", "relative error", logy=True))
+        self.error = Pair(figure("relative error", "t", "|z − z_ref| / |z_ref|", logy=True))
         figs = [f for _, f, _ in self.portraits] + [self.energy.fig, self.error.fig]
         self.grid = grid(*[pane(f) for f in figs], ncols=3 if len(figs) in (3, 6) else 2)
 
@@ -80,7 +80,7 @@ class Figures:
         # the log axis over a dozen empty decades.
         self.energy.set({slot: peaks(c.run.t[1:], np.abs(c.run.H_ext[1:, 0])) for slot, c in cs.items()})
         against = next((c.against for c in cs.values() if c.against), None)
-        self.error.fig.title.text = f"relative error |z − z_ref| / |z_ref|, against {against or 'no reference'}"
+        self.error.fig.title.text = f"relative error vs {against or 'no reference'}"  # |z − z_ref| / |z_ref|
         self.error.colors(names(runs))
         self.error.set(over_time(runs, lambda c: (c.run.t[1:], c.error[1:]) if c.error is not None else (None, None),
                                  logy=True))  # 0 at t = 0
