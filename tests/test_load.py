@@ -39,7 +39,9 @@ through Playwright's async API (one event loop, the pages work at once):
 Latency is timed inside each page on the page's own clock (performance.now()), so the Python side
 serving 11 pages does not enter it: the move is the keydown event, "update" the first change a
 server patch makes to a ColumnDataSource of the page's Bokeh document after it (the plots got the
-new data), "settled" the session's busy spinner hidden again (its style) (every plot of the move delivered).
+new data), "settled" the session's busy spinner hidden again (its style; every plot of the move delivered),
+or the update itself where the spinner was not shown (a quick comparison is computed in the move's
+handler, and all its plots come in one message).
 This is more reliable than timing websocket frames from Python: the first PATCH-DOC after a move
 is the URL echo of the location sync, which says nothing about the plots, and frame events reach
 a Python loop shared by 11 pages late. A move counts as received when its update arrives; gamma
@@ -276,7 +278,7 @@ def server():
 
 # In-page instrumentation: keydown times, and the times of Bokeh document changes that matter.
 INSTRUMENT_JS = """() => {
-    const L = window.__load = {keys: [], cds: [], settled: [], slider: []};
+    const L = window.__load = {keys: [], cds: [], busy: [], settled: [], slider: []};
     document.addEventListener("keydown", () => L.keys.push(performance.now()), true);
     for (const doc of Bokeh.documents) doc.on_change((ev) => {
         const m = ev.model;
@@ -284,9 +286,8 @@ INSTRUMENT_JS = """() => {
         const t = performance.now();
         if (m.type === "ColumnDataSource") L.cds.push(t);
         else if (m.type === "Slider" && ev.attr === "value") L.slider.push([t, m.value]);
-        else if (ev.attr === "styles" && (m.css_classes || []).includes("loader")
-                 && (m.styles || {}).visibility === "hidden")
-            L.settled.push(t);
+        else if (ev.attr === "styles" && (m.css_classes || []).includes("loader"))
+            ((m.styles || {}).opacity === "0" ? L.settled : L.busy).push(t);
     });
     return Bokeh.documents.length;
 }"""
@@ -297,10 +298,14 @@ UPDATE_JS = """(k) => {
     const t0 = L.keys[k], u = L.cds.find((t) => t > t0);
     return u === undefined ? null : [u - t0];
 }"""
-# [ms from the k-th keydown to the spinner being hidden after the first plot-data change].
+# [ms from the k-th keydown to settled]: the spinner hidden after the first plot-data change, or,
+# when the spinner was not shown, that change itself (a quick comparison is computed in the move's
+# handler and every plot arrives in that one message).
 SETTLED_JS = """(k) => {
     const L = window.__load, t0 = L.keys[k], u = L.cds.find((t) => t > t0);
-    const s = u === undefined ? undefined : L.settled.find((t) => t >= u);
+    if (u === undefined) return null;
+    if (!L.busy.some((t) => t > t0 && t <= u)) return [u - t0];
+    const s = L.settled.find((t) => t >= u);
     return s === undefined ? null : [s - t0];
 }"""
 CDS_COUNT_JS = "() => window.__load.cds.length"
