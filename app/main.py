@@ -7,6 +7,7 @@ BokehJS come from Panel's and Bokeh's bundled resources.
 import contextlib
 import html
 import io
+import time
 from pathlib import Path
 from urllib.parse import parse_qsl, urlencode
 
@@ -19,13 +20,15 @@ from .features import FEATURES
 from .jobs import Note
 from .memory import log_when_freed, map_large_blocks
 from .page import SCRIPTS, Design, adjust_panel
-from .plotting import katex_fonts_css
+from .plotting import katex_fonts_css, push
 from .presets import URL_NAMES, parse_items, query_items
 from .study import Controls, PresetLinks, SceneInfo, Study, study_report
 from .warmup import prepare
 
 ASSETS = Path(__file__).resolve().parent.parent / "assets"
 NOTIFY_MS = {"error": 8000, "warning": 6000, "info": 4000}
+AHEAD_MS = 300  # a tab is built ahead at most this often (App._ahead)
+AHEAD_IDLE_S = 1.0  # after the page's last change
 COPY_LINK_JS = """
 const label = 'Copy link to this view';
 const done = (text) => { source.label = text; setTimeout(() => { source.label = label; }, 2500); };
@@ -82,6 +85,9 @@ class App(param.Parameterized):
         for f in FEATURES:
             if f.url:
                 self.states[f.name].param.watch(lambda e: self._write_url(), list(f.url))
+        self._touched = time.monotonic()
+        self._ahead_done = set()
+        self.study.param.watch(self._touch, [*Study.INPUTS, "view"])
         pn.state.onload(self._flush)
         pn.state.on_session_destroyed(self._stop)
 
@@ -147,10 +153,44 @@ class App(param.Parameterized):
         pn.state.location.search = "?" + urlencode(items)
 
     def _flush(self):
-        """On load: write the state into the URL and post the messages of the session's start."""
+        """On load: write the state into the URL and post the messages of the session's start, and
+        start building the other tabs ahead."""
         self._write_url()
         for note in self._pending:
             self._notify(note.level, note.text)
+        self._next_ahead()
+
+    def _touch(self, *events):
+        self._touched = time.monotonic()
+
+    def _ahead(self):
+        """Build one more tab ahead of its first showing, hidden, while the page is idle (no change
+        for AHEAD_IDLE_S, nothing computing): a first visit then shows it at once (it cost 0.5-1.8 s
+        to build there, most of it the browser's), at the price of the server's time (0.1-0.4 s a
+        tab, in idle time) and the page's memory. One tab every AHEAD_MS, those of features with
+        `ahead`; the shown tab's view also gets its turn (Orbits builds the figures of other scenes'
+        shapes)."""
+        if self._stopped:
+            return
+        busy = self.study.running or any(getattr(s, "running", False) for s in self.states.values())
+        todo = [f.name for f in FEATURES if f.ahead and f.name not in self._ahead_done]
+        if todo and not busy and time.monotonic() - self._touched >= AHEAD_IDLE_S:
+            self._ahead_done.add(todo[0])
+            push(lambda: self._build(todo[0]))
+            todo = todo[1:]
+        if todo:
+            self._next_ahead()
+
+    def _next_ahead(self):
+        doc = pn.state.curdoc
+        if doc is not None and doc.session_context is not None:  # served: no idle time otherwise
+            doc.add_timeout_callback(self._ahead, AHEAD_MS)
+
+    def _build(self, name):
+        box = self.tabs[[f.name for f in FEATURES].index(name)]
+        if not len(box):
+            box.append(self.views[name])
+        self.views[name].ahead()
 
     def _report(self):
         """The report file of the current comparison; bad input becomes a message and a file saying so."""

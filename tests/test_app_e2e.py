@@ -186,7 +186,7 @@ def test_a_long_run_starts_shows_progress_and_cancels(page):
     page.page.wait_for_timeout(1500)
     page.shot("07-long-run-running")
     clicked = time.monotonic()
-    page.page.locator("button", has_text="Cancel").click()
+    page.page.locator("button:visible", has_text="Cancel").click()
     page.page.get_by_text("cancelled at t =").first.wait_for(timeout=10_000)
     assert time.monotonic() - clicked < 10
     page.page.locator(".bk-tab", has_text="Orbits").click()
@@ -265,7 +265,7 @@ def test_work_precision_measures_a_click_opens_the_point_and_long_horizons_cance
     page.page.locator("button", has_text="Start long horizons").click()
     page.page.locator(".wplabel", has_text="to T = 1e+06").wait_for()
     clicked = time.monotonic()
-    page.page.locator("button", has_text="Cancel").nth(1).click()
+    page.page.locator("button:visible", has_text="Cancel").nth(1).click()
     page.page.get_by_text("cancelled after").first.wait_for(timeout=5_000)
     assert time.monotonic() - clicked < 5
     page.check()

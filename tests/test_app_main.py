@@ -154,12 +154,15 @@ def test_a_data_update_does_not_walk_the_model_graph_and_a_new_model_is_attached
 def test_the_layouts_shim_still_matches_bokehjs():
     """app/static/bokeh_layouts.js defers a root's layout while a message is applied. It relies on
     LayoutDOMView.invalidate_layout handing the request up to the root, which lays out the page at
-    once, and on Document.apply_json_patch applying a message: when a Bokeh release changes either,
-    this says so."""
+    once, and on Document.apply_json_patch applying a message; it lays out and waits for only the
+    shown components through LayoutDOMView.layoutable_views and has_finished (and Panel's
+    TabsView.update_active), and a plot alone through PlotView._invalidate_layout_if_needed: when a
+    Bokeh or Panel release changes any of these, this says so."""
     import re
     from pathlib import Path
 
     import bokeh
+    import panel
 
     js = (Path(bokeh.__file__).parent / "server" / "static" / "js" / "bokeh.js").read_text()
     assert re.search(r"invalidate_layout\(\) \{\s*// TODO[^\n]*\n[^\n]*\n\s*if \(this\.parent instanceof "
@@ -168,6 +171,19 @@ def test_the_layouts_shim_still_matches_bokehjs():
         "BokehJS lays out differently: revisit app/static/bokeh_layouts.js"
     assert re.search(r"apply_json_patch\(patch, buffers = new Map\(\)\) \{", js)
     assert '"models/layouts/layout_dom":' in js and '"document/document":' in js
+    # It lays out only what is shown, through the children a layout walks, and waits for those only
+    assert re.search(r"get layoutable_views\(\) \{\s*return this\.child_views\.filter\(\(c\) => c instanceof "
+                     r"LayoutDOMView\);", js)
+    assert re.search(r"has_finished\(\) \{\s*if \(!super\.has_finished\(\)\) \{\s*return false;\s*\}\s*"
+                     r"if \(this\.is_layout_root && !this\._layout_computed\) \{\s*return false;\s*\}\s*"
+                     r"for \(const child_view of this\.child_views\) \{", js)
+    # a plot whose axes changed lays out itself through compute_layout
+    assert re.search(r"_invalidate_layout_if_needed\(\) \{(?:(?!\n        \}\n).)*this\.compute_layout\(\);",
+                     js, re.DOTALL)
+    assert '"models/plots/plot_canvas":' in js
+    panel_js = (Path(panel.__file__).parent / "dist" / "panel.js").read_text()
+    assert re.search(r"class TabsView extends [^\n]*\{(?:(?!\n    class ).)*\n        update_active\(\) \{",
+                     panel_js, re.DOTALL), "Panel's Tabs changed: revisit the shown-tab layout in bokeh_layouts.js"
 
 
 def test_no_model_of_any_tab_needs_the_bokehjs_bundles_the_page_leaves_out():
@@ -243,3 +259,33 @@ def test_a_message_queued_while_another_batch_is_written_is_still_sent():
         document._WRITE_MSGS.pop(doc, None)
         document._WRITE_BLOCK.pop(doc, None)
     assert sent == [["one"], ["two"]]
+
+
+def test_tabs_are_built_ahead_one_at_a_time_while_the_page_is_idle_and_start_no_measurement():
+    """App._ahead builds one more tab per call, hidden, once the page has been idle AHEAD_IDLE_S:
+    its layout, and the data at hand drawn; nothing is computed for it (the θ lesson, the long run
+    and the map start on their first showing: computed ahead, every page would hold their memory
+    leases). Gauges and Work-precision are not built ahead. Orbits builds the figures of the
+    two-degree-of-freedom shape, hidden."""
+    app = main.App()
+    names = [f.name for f in FEATURES]
+    app._ahead()
+    assert not app._ahead_done, "not idle yet"
+    app._touched -= main.AHEAD_IDLE_S
+    for _ in range(len(FEATURES)):
+        app._ahead()
+    assert app._ahead_done == {f.name for f in FEATURES if f.ahead} == set(names) - {"gauges", "workprecision"}
+    assert [len(app.tabs[i]) for i in range(len(names))] == [n not in ("gauges", "workprecision") for n in names]
+    assert app.tabs.active == names.index("compare") and app.study.view == "compare"
+    lesson = app.states["theta"]
+    assert lesson.results is None and not app.states["long"].data and app.states["map"].result is None
+    assert not app.states["workprecision"].measure.rows and app.states["gauges"].results is None
+    assert not any(app.views[n]._stale for n in ("structure", "cloud", "play"))
+    orbits = app.views["compare"]
+    assert len(orbits.grids) == 2 and [g.visible for g in orbits.grids] == [True, False]
+    app.study.view = "theta"
+    assert lesson.results is not None and lesson.sweep is not None, "computed when first shown"
+    app.study.view = "compare"
+    app.study.scene = "charged"
+    assert [g.visible for g in orbits.grids] == [False, True], "the charged particle's figures were ready"
+    app._stop(None)

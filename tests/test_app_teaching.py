@@ -139,7 +139,7 @@ def test_06_the_long_run_of_the_first_view_runs_and_shows_progress(page):
     assert page.page.locator(".notyf__toast", has_text="reduce h").count() == 0
     key = page.page.locator(".colorkey").last
     assert "stopped" not in key.inner_text() and key.inner_text().count("\n") == 0
-    cancel = page.page.locator("button", has_text="Cancel")
+    cancel = page.page.locator("button:visible", has_text="Cancel")
     try:
         cancel.click(timeout=3000)
     except PlaywrightTimeout:  # the run ended (1e6 steps per method), between the check and the click

@@ -551,7 +551,7 @@ async def scenario(base, sampler, sessions, probe=None):
             r["cancel_s"] = None
             if r["long_status_before_cancel"] == "running":
                 t_cancel = time.monotonic()
-                await long_page.locator("button", has_text="Cancel").click()
+                await long_page.locator("button:visible", has_text="Cancel").click()
                 await long_page.get_by_text("cancelled at t =").first.wait_for(timeout=MOVE_TIMEOUT_MS)
                 r["cancel_s"] = round(time.monotonic() - t_cancel, 2)
             r["cancel_status"] = await long_status(long_page)

@@ -15,12 +15,14 @@ class Feature:
     view: object
     state: object = None
     url: dict = field(default_factory=dict)
+    ahead: bool = True  # its tab is built ahead of its first showing, in the page's idle time
 
 
 class FeatureView(pn.viewable.Viewer):
-    """A tab's view: its layout (figures included) is built once, when first shown; new data then
-    only replaces the figures' data. Data that arrives while another tab is shown is drawn when
-    this one is shown again."""
+    """A tab's view: its layout (figures included) is built once, ahead of its first showing (in the
+    page's idle time, hidden: `ahead`) or when it is first shown; new data then only replaces the
+    figures' data. Data that arrives while another tab is shown is drawn when this one is shown
+    again."""
 
     NAME = ""
 
@@ -30,6 +32,7 @@ class FeatureView(pn.viewable.Viewer):
         self.state = state
         self._layout = None
         self._stale = True
+        self._opened = False
 
     @property
     def visible(self):
@@ -39,9 +42,6 @@ class FeatureView(pn.viewable.Viewer):
         if self._layout is None:
             self._layout = self.layout()
             self._stale = True
-            self.first_shown()
-        if self._stale:
-            self.redraw()
         return self._layout
 
     def first_shown(self):
@@ -49,8 +49,18 @@ class FeatureView(pn.viewable.Viewer):
         its first measurement here, so that it never opens empty)."""
 
     def shown(self):
-        """Its tab has become the shown one."""
+        """Its tab has become the shown one: the first time, its first measurement starts; data
+        that changed meanwhile is drawn."""
+        if not self._opened:
+            self._opened = True
+            self.first_shown()
         if self._layout is not None and self._stale:
+            self.redraw()
+
+    def ahead(self):
+        """Ahead of the tab's first showing (its layout built, hidden): draw the data at hand, so
+        that a first visit shows it at once."""
+        if self._stale:
             self.redraw()
 
     def follow(self, obj, *names):

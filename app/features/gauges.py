@@ -168,4 +168,6 @@ class GaugeView(FeatureView):
         self.floor.object = f"<p class='doc'>{html.escape(floor_text(largest))}</p>"
 
 
-FEATURE = Feature("gauges", "Gauges", GaugeView, GaugeStudy)
+# Not built ahead: ten figures and five equations (a second of the page's time) that only the charged
+# particle uses; built ahead once a scene change made them worth it, they froze the page a second later.
+FEATURE = Feature("gauges", "Gauges", GaugeView, GaugeStudy, ahead=False)

@@ -6,7 +6,7 @@ import panel as pn
 
 from cosymp.scenes import SCENES
 
-from ..plotting import SLOTS, Pair, Raster, figure, grid, note, pane, path, peaks, reset_ranges, table
+from ..plotting import SLOTS, Pair, Raster, figure, grid, note, pane, path, peaks, push, reset_ranges, table
 from ..study import LIVE_REFERENCE_STEPS
 from .base import Feature, FeatureView
 from .common import color_key, comparisons, names, numbers, over_time, phase_axes, tail, verdict, zcols
@@ -49,7 +49,9 @@ class Figures:
                 self.portraits.append((slot, fig, Raster(fig) if dense else Pair(fig, start=True)))
                 self.tails.append(Pair(fig, width=3.2, emphasis=True))
         self.energy = Pair(figure("max |H + p_t| per bin (exact: 0)", "t", "|H + p_t|", logy=True))
-        self.error = Pair(figure("relative error", "t", "|z − z_ref| / |z_ref|", logy=True))
+        # One title for every scene (a changed title makes the page lay out the tab): what the error
+        # is measured against is said below the plots (remark).
+        self.error = Pair(figure("relative error to the reference", "t", "|z − z_ref| / |z_ref|", logy=True))
         figs = [f for _, f, _ in self.portraits] + [self.energy.fig, self.error.fig]
         self.grid = grid(*[pane(f) for f in figs], ncols=3 if len(figs) in (3, 6) else 2)
 
@@ -79,8 +81,6 @@ class Figures:
         # From the first step: H + p_t is 0 by construction at t = 0, and drawn at FLOOR it stretched
         # the log axis over a dozen empty decades.
         self.energy.set({slot: peaks(c.run.t[1:], np.abs(c.run.H_ext[1:, 0])) for slot, c in cs.items()})
-        against = next((c.against for c in cs.values() if c.against), None)
-        self.error.fig.title.text = f"relative error vs {against or 'no reference'}"  # |z − z_ref| / |z_ref|
         self.error.colors(names(runs))
         self.error.set(over_time(runs, lambda c: (c.run.t[1:], c.error[1:]) if c.error is not None else (None, None),
                                  logy=True))  # 0 at t = 0
@@ -93,16 +93,17 @@ class Figures:
 
 
 def remark(runs):
-    """What the errors of a scene without an exact flow are measured against."""
+    """What the errors are measured against: the exact flow, or a reference run for a scene without
+    one (or nothing, when that run would be too long for a live view)."""
     if SCENES[runs.scene].has_flow:
-        return ""
+        return "<p class='doc'>Errors: relative to the exact flow.</p>"
     against = next((e.comparison.against for e in runs.ok if e.comparison.against), None)
     if against is None:
         return (f"<p class='doc'>No closed-form flow for '{runs.scene}', and its reference would take more than "
                 f"{LIVE_REFERENCE_STEPS:.0e} rk8 steps here: no error plot; the report or <code>cosymp run</code> "
                 "measure the final error.</p>")
-    return (f"<p class='doc'>No closed-form flow for '{runs.scene}': the errors are measured against a reference "
-            f"run, {against} (as in the report).</p>")
+    return (f"<p class='doc'>Errors: no closed-form flow for '{runs.scene}', so relative to a reference run, "
+            f"{against} (as in the report).</p>")
 
 
 class OrbitsView(FeatureView):
@@ -119,15 +120,26 @@ class OrbitsView(FeatureView):
         return pn.Column(self.key, self.grids, self.remark, note(NUMBERS_TEXT), self.table,
                          sizing_mode="stretch_width")
 
+    def figures(self, key):
+        """The figures of a layout shape: they join the page once, then are shown or hidden."""
+        if key not in self._figures:
+            figs = self._figures[key] = Figures(*key)
+            figs.grid.visible = False
+            self.grids.append(figs.grid)
+        return self._figures[key]
+
+    def ahead(self):
+        """Besides the data, the figures of every scene's usual shape (one or two degrees of
+        freedom), hidden: a scene change to another shape then shows them, and builds nothing."""
+        super().ahead()
+        push(lambda: [self.figures(shape(name, False, False)) for name in SCENES])
+
     def update(self):
         runs = self.study.results
         if runs is None:
             return
         which = (runs.scene, runs.dense, apart(runs))
-        figs = self._figures.get(shape(*which))
-        if figs is None:  # a shape's figures join the page once, then are shown or hidden
-            figs = self._figures[shape(*which)] = Figures(*shape(*which))
-            self.grids.append(figs.grid)
+        figs = self.figures(shape(*which))
         if self._shown is None or self._shown[0] != runs.scene or figs.scene != runs.scene:
             figs.label(runs.scene)
         for other in self._figures.values():

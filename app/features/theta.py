@@ -91,8 +91,7 @@ class ThetaLesson(Follower):
         self._shown = (key, inputs[3], inputs[1][0].theta)
         if sweep is not None:
             self._sweep_key = key
-            self.sweep = sweep
-        self.results = runs
+        self.param.update(results=runs, **({"sweep": sweep} if sweep is not None else {}))  # one redraw
         note_ = failure_note(runs)
         if note_:
             self.say(note_)

@@ -539,4 +539,5 @@ class Measurements:
         self.long.release()
 
 
-FEATURE = Feature("workprecision", "Work–precision", WorkPrecisionView, Measurements)
+# Not built ahead: its first showing starts a measurement of seconds, which its layout does not shorten.
+FEATURE = Feature("workprecision", "Work–precision", WorkPrecisionView, Measurements, ahead=False)
