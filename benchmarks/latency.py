@@ -18,15 +18,18 @@ Playwright round trips do not enter the numbers):
   (BokehJS applies them with setv/stream_to/patch_to and sync = false; checked in the live page:
   the app's plot updates arrive as ColumnDataSource.data, Range1d and Figure events, tab contents
   and rebuilt layouts as Tabs.tabs and Column.children). An event counts when it came from the
-  server (sync false) and either sets, streams or patches a data source (images included), sets a
-  property of a plot part (Plot, renderers, glyphs, ranges, scales, tickers, formatters, colour
-  mappers, data sources), or adds, removes or replaces models (a property set to models, roots
-  added or removed: new plots may come in them). Layout read-backs from the browser
+  server (sync false) and changes what is shown: it sets, streams or patches a data source of a
+  shown plot (images included), sets a property of a shown plot's part (the Plot, its renderers,
+  glyphs, ranges, scales, tickers, formatters, colour mappers, data sources), adds, removes or
+  replaces models in a shown component (a property set to models: new plots may come in them), or
+  adds or removes roots. (The app builds hidden tabs ahead and fills their plots while the page is
+  idle; those messages change nothing shown.) Layout read-backs from the browser
   (Figure.inner_width, sync true), widget values, HTML text and the busy spinner do not count.
-  An animation-frame poller adds a "drawn" event the first moment each Plot view is visible and
-  has finished painting (a new page's plots, the new plots of a rebuilt layout or a tab, and the
-  plots of a tab built earlier and hidden, shown without any message: the poller runs every frame
-  for HOT_MS after each input).
+  An animation-frame poller adds a "drawn" event the first moment a Plot view is visible and has
+  finished painting after it was not (a new page's plots, the new plots of a rebuilt layout or a
+  tab, and hidden plots shown again, such as a tab built earlier or the figures of another
+  scene's shape, which may get their data while hidden: the poller runs every frame for HOT_MS
+  after each input, which also takes the shown plots as its starting point).
 * Each counted event also records the next requestAnimationFrame callback after it: its paint.
   (After a layout swap that frame can come 0.4-2 s later: the main thread is building views.)
 * Settled: at least one counted event after the input; then the last counted event painted, no
@@ -52,8 +55,9 @@ Actions: a fresh page at the app's own first view (navigation to first plot draw
 on a page opened at ?scene=damped: the scene changed to each scene and back to damped, the method
 changed (midpoint -> gauss4 -> symplectic-euler -> midpoint), the gamma slider dragged (first move
 to first change, last move to settled), θ moved by 20 ArrowRight presses with the Lifted theta-
-method (first press to both); the first visit of each tab on a fresh page at the first view; and a
-load: ten damped pages each move gamma by one key press at most every 2 s (closed loop: a move waits
+method (first press to both); the first visit of each tab on a fresh page at the first view (once
+the page is quiet, and READ_S seconds later: the app builds tabs ahead while the page is idle); and
+a load: ten damped pages each move gamma by one key press at most every 2 s (closed loop: a move waits
 until the page's previous move settled, so each latency belongs to one move and a slow server gets
 fewer moves) for 60 s while an eleventh page runs a long run (LONG_QUERY); its progress bar (a
 <progress>) is read every 5 s and its counted events are kept (the run redraws its plots as chunks
@@ -112,6 +116,7 @@ THETA_PRESSES = 20
 PARTS = ("first", "interactions", "tabs", "load")
 LOAD_PAGES = 10
 LOAD_SECONDS = 60
+READ_S = 5                   # a tab's first visit is also timed this long after the page is quiet
 LOAD_INTERVAL_S = 2.0
 LOAD_MOVE_TIMEOUT_MS = 60_000
 LOAD_POLL_S = 0.25           # how often a page with a move under way is asked whether it settled
@@ -149,17 +154,36 @@ INSTRUMENT_JS = """(() => {
   const hasModels = (v, depth) => isModel(v) || (depth < 3 && (
       Array.isArray(v) ? v.some((x) => hasModels(x, depth + 1))
       : v instanceof Map ? [...v.values()].some((x) => hasModels(x, depth + 1)) : false));
+  // What is shown when a message is applied: the models of the shown plots (each plot and every
+  // model it refers to), and the models with a shown view. Taken once per message (it reads the
+  // page's layout), while its first event is handled.
+  let seen = null;
+  const seeing = () => {
+    if (seen === null) {
+      const inPlots = new Set(), withView = new Set();
+      for (const v of plotViews()) {
+        inPlots.add(v.model);
+        for (const m of v.model.references()) inPlots.add(m);
+      }
+      for (const v of Bokeh.index.all_views()) if (v.el instanceof Element && shown(v.el)) withView.add(v.model);
+      seen = {inPlots, withView};
+      queueMicrotask(() => { seen = null; });
+    }
+    return seen;
+  };
   const onChange = (e) => {
     if (e.sync !== false) return;   // made in the browser, not applied from the server
-    if (["ColumnsStreamed", "ColumnsPatched", "ColumnDataChanged"].includes(e.kind))
-      record(e.kind, true, false);
-    else if (["RootAdded", "RootRemoved"].includes(e.kind)) {
+    if (["ColumnsStreamed", "ColumnsPatched", "ColumnDataChanged"].includes(e.kind)) {
+      if (seeing().inPlots.has(e.model)) record(e.kind, true, false);
+    } else if (["RootAdded", "RootRemoved"].includes(e.kind)) {
       record(e.kind, false, false);
       L.lastGraph = L.lastEvent;
     } else if (e.kind === "ModelChanged") {
       const part = parts.some((c) => e.model instanceof c), graph = hasModels(e.value, 0);
-      if (part || graph) record((graph ? "models:" : "") + e.model.type + "." + e.attr, part, false);
-      if (graph) L.lastGraph = L.lastEvent;
+      const {inPlots, withView} = (part || graph) ? seeing() : {};
+      const counts = part ? inPlots.has(e.model) : graph && withView.has(e.model);
+      if (counts) record((graph ? "models:" : "") + e.model.type + "." + e.attr, part, false);
+      if (counts && graph) L.lastGraph = L.lastEvent;
     }
   };
   // Shown: laid out, and not hidden by display, visibility (inactive Bokeh tabs) or opacity.
@@ -175,7 +199,9 @@ INSTRUMENT_JS = """(() => {
   // True while a root view has views that are not built and painted yet (new models being shown).
   const building = () => window.Bokeh !== undefined && Bokeh.index !== undefined
                          && ![...Bokeh.index].every((v) => v.has_finished());
-  const hooked = new WeakSet(), drawn = new WeakSet();
+  // The plot views shown and painted at the poller's last look: a plot counts as drawn when it joins.
+  const hooked = new WeakSet();
+  let showing = new WeakSet();
   let anyDrawn = false;
   // Hook new documents; note newly drawn plots every animation frame while new plot views may come
   // (no plot drawn yet, HOT ms after models were added or replaced, or while views are building
@@ -195,12 +221,15 @@ INSTRUMENT_JS = """(() => {
       hot = hot || sinceGraph < HOT || (sinceGraph < 60_000 && building());
       if (hot) {
         const Plot = B.Models.get("Plot");
-        for (const v of B.index.all_views())
-          if (v.model instanceof Plot && !drawn.has(v) && v.has_finished() && shown(v.el)) {
-            drawn.add(v);
+        for (const v of B.index.all_views()) {
+          if (!(v.model instanceof Plot)) continue;
+          if (!shown(v.el)) showing.delete(v);
+          else if (!showing.has(v) && v.has_finished()) {
+            showing.add(v);
             anyDrawn = true;
             record("drawn:" + v.model.type, true, true);
           }
+        }
       }
     }
     if (hot) requestAnimationFrame(tick);
@@ -240,7 +269,12 @@ INSTRUMENT_JS = """(() => {
   // Before an input: remember the plots, and look for newly shown plots every frame for HOT ms (a
   // tab built earlier and hidden is shown without a message from the server); returns the time to
   // look for inputs from.
-  L.arm = () => { L.before = L.plots(); L.lastGraph = performance.now(); return L.lastGraph; };
+  L.arm = () => {
+    L.before = L.plots();
+    showing = new WeakSet(plotViews().filter((v) => v.has_finished()));
+    L.lastGraph = performance.now();
+    return L.lastGraph;
+  };
 
   const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
   // When the page became quiet (the last counted event painted, no view building), or null.
@@ -607,15 +641,19 @@ def theta_keys(page):
 
 
 def run_tabs(browser, url, repeats, record):
+    """Each tab's first visit on a fresh page: at once (the page quiet), and after READ_S more seconds
+    of reading the first view, in which the app builds tabs ahead."""
     for r in range(repeats):
         for name in TABS:
-            context, page, _ = open_page(browser, url)
-            try:
-                attempt(page, record, "tab", name, r,
-                        lambda page=page, name=name: measure(page, tab(page, name).click,
-                                                             first_of("pointerdown")))
-            finally:
-                context.close()
+            for wait_s in (0, READ_S):
+                context, page, _ = open_page(browser, url)
+                try:
+                    page.wait_for_timeout(wait_s * 1000)
+                    attempt(page, record, "tab", name if not wait_s else f"{name} after {wait_s} s", r,
+                            lambda page=page, name=name: measure(page, tab(page, name).click,
+                                                                 first_of("pointerdown")))
+                finally:
+                    context.close()
 
 
 class Mover:
