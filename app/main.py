@@ -47,6 +47,10 @@ class App(param.Parameterized):
     """One session: the study (first computed from the link's settings), each feature's state and
     view, the URL and the notifications."""
 
+    # time.monotonic() of the last change in any page of this server: tabs are built ahead (_ahead)
+    # only when the whole server has been idle, so that pages being used never wait for that work
+    last_change = 0.0
+
     def __init__(self, **params):
         super().__init__(**params)
         prepare(preload=False)
@@ -85,7 +89,7 @@ class App(param.Parameterized):
         for f in FEATURES:
             if f.url:
                 self.states[f.name].param.watch(lambda e: self._write_url(), list(f.url))
-        self._touched = time.monotonic()
+        self._touch()
         self._ahead_done = set()
         self.study.param.watch(self._touch, [*Study.INPUTS, "view"])
         pn.state.onload(self._flush)
@@ -161,11 +165,11 @@ class App(param.Parameterized):
         self._next_ahead()
 
     def _touch(self, *events):
-        self._touched = time.monotonic()
+        App.last_change = time.monotonic()
 
     def _ahead(self):
-        """Build one more tab ahead of its first showing, hidden, while the page is idle (no change
-        for AHEAD_IDLE_S, nothing computing): a first visit then shows it at once (it cost 0.5-1.8 s
+        """Build one more tab ahead of its first showing, hidden, while the server is idle (no
+        change in any page for AHEAD_IDLE_S, nothing computing in this one): a first visit then shows it at once (it cost 0.5-1.8 s
         to build there, most of it the browser's), at the price of the server's time (0.1-0.4 s a
         tab, in idle time) and the page's memory. One tab every AHEAD_MS, those of features with
         `ahead`; the shown tab's view also gets its turn (Orbits builds the figures of other scenes'
@@ -174,7 +178,7 @@ class App(param.Parameterized):
             return
         busy = self.study.running or any(getattr(s, "running", False) for s in self.states.values())
         todo = [f.name for f in FEATURES if f.ahead and f.name not in self._ahead_done]
-        if todo and not busy and time.monotonic() - self._touched >= AHEAD_IDLE_S:
+        if todo and not busy and time.monotonic() - App.last_change >= AHEAD_IDLE_S:
             self._ahead_done.add(todo[0])
             push(lambda: self._build(todo[0]))
             todo = todo[1:]
