@@ -14,6 +14,7 @@
    are held by value, as numba holds its named tuple. The charged scene is the paper's
    beta(t) = B0 (1 + eps sin(w t)). */
 #include <math.h>
+#include <stdlib.h>
 
 #define DECAYING 1
 #define DAMPED 2
@@ -882,6 +883,17 @@ INLINE long coefs(const Params *P, const Family *D, double tk, double tk1, doubl
     return e;
 }
 
+/* loops._add: Neumaier's compensated sum of p_t's increments, (sum, compensation) per member */
+INLINE void add(double *S, double *Cc, long i, double d, double *sum, double *comp)
+{
+    double s = S[i] + d;
+    if (fabs(S[i]) >= fabs(d))
+        *comp = Cc[i] + ((S[i] - s) + d);
+    else
+        *comp = Cc[i] + ((d - s) + S[i]);
+    *sum = s;
+}
+
 /* _accept: check the member's new state, store it, record it */
 INLINE int accept(int status, long i, const double *z, const double *old, double pt, Loop *L,
                          long rec, int recording)
@@ -928,6 +940,11 @@ INLINE int propagate(int family, const Family *D, const Work *W,
                 L.dZrec[i * ld + r] = NAN;
         }
     }
+    double *S = malloc(L.N * sizeof(double)), *Cc = malloc(L.N * sizeof(double));
+    for (long i = 0; i < L.N; i++) {
+        S[i] = L.PT[i];
+        Cc[i] = 0.0;
+    }
     long rec = 1, prev = 0;
     double up = 1.0, down = 1.0;
     for (long k = 0; k < L.nsteps; k++) {
@@ -942,7 +959,7 @@ INLINE int propagate(int family, const Family *D, const Work *W,
 #if LINEAR
         double s = lmatrix(family, D, W, P, C, tk, h, Mm, Q);
 #endif
-        int recording = (k + 1) % L.stride == 0;
+        int recording = (k + 1) % L.stride == 0 || k + 1 == L.nsteps;
         for (long i = 0; i < L.N; i++) {
 #if LINEAR
             double quad = 0.0;
@@ -961,28 +978,37 @@ INLINE int propagate(int family, const Family *D, const Work *W,
                 quad += zs[r] * qr;
             }
             rescale(z, e, up, down);
-            int status = accept(OK, i, z, old, L.PT[i] - (0.5 * quad + s), &L, rec, recording);
+            double sum, comp;
+            add(S, Cc, i, -(0.5 * quad + s), &sum, &comp);
+            int status = accept(OK, i, z, old, sum + comp, &L, rec, recording);
 #else
             for (int r = 0; r < M; r++) {
                 old[r] = L.Z[i * ld + r];
                 z[r] = old[r];
             }
-            double pt = L.PT[i];
+            double dpt = 0.0, sum, comp;
             rescale(z, e, down, up);
-            int status = step(family, D, W, C, h, z, &pt);
+            int status = step(family, D, W, C, h, z, &dpt);
             rescale(z, e, up, down);
-            status = accept(status, i, z, old, pt, &L, rec, recording);
+            add(S, Cc, i, dpt, &sum, &comp);
+            status = accept(status, i, z, old, sum + comp, &L, rec, recording);
 #endif
             if (status != OK) {
+                free(S);
+                free(Cc);
                 Lp->done = k;
                 return status;
             }
+            S[i] = sum;
+            Cc[i] = comp;
         }
         if (recording) {
             L.Trec[rec] = t0 + (k + 1) * h;
             rec += 1;
         }
     }
+    free(S);
+    free(Cc);
     Lp->done = L.nsteps;
     return OK;
 }
