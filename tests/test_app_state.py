@@ -437,7 +437,8 @@ def test_long_run_in_chunks_matches_the_one_shot_run_and_can_be_cancelled():
         H = e.comparison.run.H_ext[1:, 0]
         assert d["H_max"].max() == pytest.approx(H.max(), rel=1e-6, abs=1e-12)
         assert d["det"].max() == pytest.approx(e.comparison.det_dev.max(), rel=1e-6, abs=1e-15)
-    lr2 = longrun.LongRun(s, T_long=2e5)
+    # progress reaches the page every jobs.PROGRESS_S: a run of 2e7 steps per method outlasts that
+    lr2 = longrun.LongRun(s, T_long=2e6)
     lr2.param.watch(lambda e: lr2.cancel(), "progress")
     lr2.start()
     assert lr2.status.startswith("cancelled") and 0 < lr2.progress < 1

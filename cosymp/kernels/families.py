@@ -13,7 +13,7 @@ from numba import njit
 
 from .dispatch import (
     INLINE,
-    SCRATCH,
+    IR_INLINE,
     bfield,
     dhdt,
     drift,
@@ -54,7 +54,7 @@ Splitting.__doc__ = ("Explicit splitting of a separable H = T(p, t) + V(q, t), t
                      "then the drift a[i] h (the exact flow of T + p_t).")
 
 
-@njit(**INLINE)
+@njit(**IR_INLINE)
 def _newton_done(dz, ndz, z, nz, prev):
     """Converged to round-off: a small correction, or one that stopped shrinking near the floor."""
     size = 1.0
@@ -111,7 +111,7 @@ def theta_core(P, C, j, h, wq0, wq1, wp0, wp1, z, pt, V, Hm, Jm):
     return status, pt
 
 
-@njit(**SCRATCH)
+@njit(**IR_INLINE)
 def theta_work(D, P, z):
     return vectors(P, 4, z), matrices(P, 2, z)
 
@@ -133,7 +133,7 @@ def composition_step(D, P, C, t, h, z, pt, W):
     return status, pt
 
 
-@njit(**SCRATCH)
+@njit(**IR_INLINE)
 def explicit_work(D, P, z):
     return stage_vectors(D, P, z), vectors(P, 2, z)
 
@@ -166,7 +166,7 @@ def explicit_step(D, P, C, t, h, z, pt, W):
     return OK, pt - h * dpt
 
 
-@njit(**SCRATCH)
+@njit(**IR_INLINE)
 def gauss_work(D, P, z):
     return (stage_vectors(D, P, z), stage_vectors(D, P, z), vectors(P, 2, z), stage_flat(D, P, z),
             matrices(P, 1, z)[0], stage_square(D, P, z))
@@ -236,7 +236,7 @@ def gauss_step(D, P, C, t, h, z, pt, W):
     return status, pt
 
 
-@njit(**SCRATCH)
+@njit(**IR_INLINE)
 def boris_work(D, P, z):
     return vectors(P, 5, z)
 
@@ -282,7 +282,7 @@ def boris_step(D, P, C, t, h, z, pt, W):
     return boris_core(P, C, h, z, pt, W)
 
 
-@njit(**SCRATCH)
+@njit(**IR_INLINE)
 def exact_work(D, P, z):
     return vectors(P, 1, z)
 
@@ -295,7 +295,7 @@ def exact_step(D, P, C, t, h, z, pt, W):
     return OK, pt + H0 - energy(P, C, 1, z)
 
 
-@njit(**SCRATCH)
+@njit(**IR_INLINE)
 def splitting_work(D, P, z):
     return vectors(P, 1, z)
 

@@ -10,7 +10,22 @@ import numpy as np
 from numba import njit
 
 from .borrow import borrow
-from .dispatch import INLINE, JIT, coef, dhdt, energy, grad, lmatrix, lwork, ncoef, ndof, scaling, step, work
+from .dispatch import (
+    INLINE,
+    IR_INLINE,
+    JIT,
+    coef,
+    dhdt,
+    energy,
+    grad,
+    lmatrix,
+    lwork,
+    ncoef,
+    ndof,
+    scaling,
+    step,
+    work,
+)
 from .families import OK, OVERFLOW
 from .stack import coef_table, matrices, vectors
 
@@ -41,7 +56,7 @@ def _factors(e):
     return math.ldexp(1.0, e), math.ldexp(1.0, -e)
 
 
-@njit(**INLINE)
+@njit(**IR_INLINE)
 def _rescale(z, n, e, qf, pf):
     """q <- q qf, p <- p pf in place, unless e = 0 (qf, pf powers of two: exact)."""
     if e != 0:
@@ -50,7 +65,7 @@ def _rescale(z, n, e, qf, pf):
             z[n + i] *= pf
 
 
-@njit(**INLINE)
+@njit(**IR_INLINE)
 def _record_start(t0, Z, PT, Trec, Zrec, PTrec, dZrec, m):
     Trec[0] = t0
     for i in range(Z.shape[0]):
@@ -61,7 +76,7 @@ def _record_start(t0, Z, PT, Trec, Zrec, PTrec, dZrec, m):
                 dZrec[0, i, r] = np.nan
 
 
-@njit(**INLINE)
+@njit(**IR_INLINE)
 def _accept(status, i, z, old, pt, Z, PT, rec, recording, Zrec, PTrec, dZrec, m):
     """Check the member's new state, store it, record it. Returns the status."""
     if status == OK and not np.isfinite(pt):
@@ -82,7 +97,7 @@ def _accept(status, i, z, old, pt, Z, PT, rec, recording, Zrec, PTrec, dZrec, m)
     return status
 
 
-@njit(**INLINE)
+@njit(**IR_INLINE)
 def apply_matrix(Z, i, M, Q, old, zs, z, m, e, up, down):
     """A linear scene's step on member i: old <- Z[i]; z <- M zs with zs = old in the step's scaled
     coordinates (exponent e), z left scaled; returns zs.Q zs, p_t's quadratic term."""

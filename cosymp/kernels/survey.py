@@ -32,7 +32,21 @@ from numba.extending import overload
 from numba.np.unsafe.ndarray import to_fixed_tuple
 
 from .borrow import borrow
-from .dispatch import _INLINE, INLINE, JIT, coef, energy, lmatrix, lwork, ncoef, ndof, scaling, step, work
+from .dispatch import (
+    _INLINE,
+    INLINE,
+    IR_INLINE,
+    JIT,
+    coef,
+    energy,
+    lmatrix,
+    lwork,
+    ncoef,
+    ndof,
+    scaling,
+    step,
+    work,
+)
 from .families import OK
 from .loops import COMPLEX_STEP, _accept, _add, _coefs, _factors, _rescale, apply_matrix
 from .stack import _scene, coef_table, matrices, vectors
@@ -57,7 +71,7 @@ def _least(a, b):
     return b if b < a or math.isnan(b) else a
 
 
-@njit(**INLINE)
+@njit(**IR_INLINE)
 def determinant(A, m):
     """det of A[:m, :m] by LU with partial pivoting (A is overwritten)."""
     d = 1.0
@@ -83,7 +97,7 @@ def determinant(A, m):
     return d
 
 
-@njit(**INLINE)
+@njit(**IR_INLINE)
 def symplecticity(M, m):
     """(||M^T J M - J||_max, the same divided by the largest sum of |terms| that make up an entry
     of M^T J M): the absolute defect and a scale-free one (round-off level for a symplectic map
@@ -106,7 +120,7 @@ def symplecticity(M, m):
     return worst, worst / size if size > 0.0 else math.inf
 
 
-@njit(**INLINE)
+@njit(**IR_INLINE)
 def grow(M, e, A, B, state, m):
     """A <- M A, scaled by an exact power of two 2^-x once its largest entry leaves [2^-RANGE,
     2^RANGE] (x ln 2 added to state[0]: no logarithm per step); A is kept in the scaled
@@ -154,7 +168,7 @@ def _energy_after(P, C, end, Ce, t, z):
     return energy(P, Ce, 0, z)
 
 
-@njit(**INLINE)
+@njit(**IR_INLINE)
 def _increment_row(X, i, z, old, h, n):
     """Row i of the volume estimator's matrix: the increment of a member in (q, t, p)."""
     for r in range(n):
@@ -163,7 +177,7 @@ def _increment_row(X, i, z, old, h, n):
     X[i, n] = h
 
 
-@njit(**INLINE)
+@njit(**IR_INLINE)
 def _reduce(k, width, t1, M, mapped, want, e, hext, X, volume, acc, env, tb, G, B, gstate, m):
     """Fold one step's wanted figures into acc, its bin and the growth product (gstate[2] = 0
     once that product stopped being finite)."""
