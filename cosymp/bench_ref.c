@@ -8,9 +8,10 @@
 
      -DSCENE=DECAYING|DAMPED|MODULATED|CHARGED|KAPITZA  -DNDOF=n -DNCOEF=k -DLINEAR=0|1
 
-   The sizes numba knows when it compiles (state size, coefficient count) are compile-time
-   constants here too; the family's data (tableau, weights, gammas, offsets, and so the number
-   of stages and offsets) arrive at run time as arrays, as numba receives them. Scene parameters
+   The sizes numba knows when it compiles (state size, coefficient count, a Gauss tableau's
+   stage count) are compile-time constants here too; the other families' data (tableau, weights,
+   gammas, offsets, and so the number of stages and offsets) arrive at run time as arrays, as
+   numba receives them. Scene parameters
    are held by value, as numba holds its named tuple. The charged scene is the paper's
    beta(t) = B0 (1 + eps sin(w t)). */
 #include <math.h>
@@ -1029,17 +1030,32 @@ int run_explicit(Loop *L, const double *params, const double *offsets, long u, c
     return propagate(EXPLICIT, &D, &W, &P, L);
 }
 
-int run_gauss(Loop *L, const double *params, const double *offsets, long u, const double *A,
-              const double *b, long s)
+INLINE int gauss_run(Loop *L, const double *params, const double *offsets, const double *A,
+                     const double *b, int s)
 {
     Params P = *(const Params *)params;
-    Family D = {.offsets = offsets, .u = (int)u};
+    Family D = {.offsets = offsets, .u = s};
     D.A = A;
     D.b = b;
-    D.s = (int)s;
+    D.s = s;
     double K[s * M * M], Zs[s * M], Fs[s * M], F[s * M], Jm[s * M * s * M];
     Work W = {.K = K, .Zs = Zs, .Fs = Fs, .F = F, .Jm = Jm};
     return propagate(GAUSS, &D, &W, &P, L);
+}
+
+/* numba compiles a Gauss tableau per stage count (its data are tuples): so is this, per case */
+int run_gauss(Loop *L, const double *params, const double *offsets, long u, const double *A,
+              const double *b, long s)
+{
+    (void)u; /* the nodes are the offsets: u = s */
+    switch (s) {
+    case 2:
+        return gauss_run(L, params, offsets, A, b, 2);
+    case 3:
+        return gauss_run(L, params, offsets, A, b, 3);
+    default:
+        return gauss_run(L, params, offsets, A, b, (int)s);
+    }
 }
 
 int run_theta(Loop *L, const double *params, const double *offsets, long u, double wq0, double wq1,

@@ -3,8 +3,9 @@
 A step advances one trajectory of the extended state (q, t, p, p_t) by h, given the scene's
 time coefficients at the family's time offsets (row j of C at t + offsets[j] h, shared by every
 member of an ensemble). z = (q, p) is updated in place; the new p_t is returned with a status.
-Family data are arrays: every tableau of a family runs one compiled loop, its stack scratch sized
-by kernels.stack's bounds. Linear scenes use the same families as matrices (kernels.linear).
+Family data are arrays, so that every tableau of a family runs one compiled loop, its stack
+scratch sized by kernels.stack's bounds; the Gauss tableaus are tuples instead, so that the size
+of their Newton solve is known at compile time (one loop per stage count, see methods._fixed). Linear scenes use the same families as matrices (kernels.linear).
 """
 from collections import namedtuple
 
@@ -41,7 +42,7 @@ Theta = namedtuple("Theta", "wq0 wq1 wp0 wp1 offsets")
 Theta.__doc__ = ("Theta step: H evaluated at q = wq0 q_k + wq1 q_k+1, p = wp0 p_k + wp1 p_k+1, "
                  "t = t_k + offsets[0] h.")
 Gauss = namedtuple("Gauss", "A b offsets")
-Gauss.__doc__ = "Implicit (collocation) Runge-Kutta tableau (A flattened), nodes = offsets."
+Gauss.__doc__ = "Implicit (collocation) Runge-Kutta tableau (A flattened), nodes = offsets; tuples."
 Composition = namedtuple("Composition", "gammas offsets")
 Composition.__doc__ = "Midpoint sub-steps of sizes gammas[i] h, sub-step i centred at offsets[i]."
 Boris = namedtuple("Boris", "offsets")

@@ -52,9 +52,16 @@ MAX_STAGES = 16
 MAX_OFFSETS = 16
 
 
+def _count(D, field, bound):
+    """The length of D's field where its type fixes it (a tuple), else the bound: array data let
+    every tableau of a family share one compiled loop."""
+    ty = D.types[D.fields.index(field)]
+    return ty.count if isinstance(ty, types.BaseTuple) else bound
+
+
 def _stages(D):
-    """Stage scratch is sized by a bound, so every tableau of a family shares one compiled loop."""
-    return MAX_STAGES
+    """The number of stages of the tableau D, or its bound MAX_STAGES."""
+    return _count(D, "b", MAX_STAGES)
 
 
 def vectors(P, k, like):
@@ -128,4 +135,5 @@ def _stage_square(D, P, like):
 @overload(coef_table, jit_options=_IR_INLINE, inline="always")
 def _coef_table(D, P):
     nc = _scene(P).ncoef
-    return lambda D, P: stack_array((MAX_OFFSETS, nc), 0.0)
+    rows = _count(D, "offsets", MAX_OFFSETS)
+    return lambda D, P: stack_array((rows, nc), 0.0)
