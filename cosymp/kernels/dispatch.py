@@ -124,8 +124,9 @@ kick = _dispatched("kick", 5, "Exact flow of V(q, t) for a time tau at row j's t
                    "kick(P, C, j, tau, z) -> p_t increment")
 drift = _dispatched("drift", 4, "Exact flow of T(p, t) + p_t from t0 for a time tau (separable scenes): "
                     "drift(P, t0, tau, z) -> p_t increment")
-scaling = _dispatched("scaling", 2, "Exponent e and time shift tau of the step from t (see "
-                      "scenes.base.SceneKernel): scaling(P, t) -> (e, tau)")
+scaling = _dispatched("scaling", 2, "Scaling exponent e of the step from t (see scenes.base.SceneKernel): "
+                      "scaling(P, t) -> e")
+shift = _dispatched("shift", 2, "Time shift tau of the scaling exponent e: shift(P, e) -> tau")
 step = _dispatched("step", 8, "One step of family D for one member: step(D, P, C, t, h, z, pt, W) -> (status, pt)")
 work = _dispatched("work", 3, "Stack work arrays of family D: work(D, P, like)", scratch=True)
 lmatrix = _dispatched("lmatrix", 8, "Step matrices of family D on a linear scene: "

@@ -23,6 +23,7 @@ from .dispatch import (
     ncoef,
     ndof,
     scaling,
+    shift,
     step,
     work,
 )
@@ -33,20 +34,37 @@ COMPLEX_STEP = 1e-50
 
 
 @njit(**INLINE)
-def _coefs(P, offsets, tk, tk1, h, C, reuse, prev, scaled=True):
-    """Time coefficients at the offsets of the step from tk to tk1, read at the scene's shifted
-    time; returns the step's scaling (e, tau), (0, 0) without `scaled` (a run whose range needs
-    none: scenes.base.Scene.needs_scaling). With `reuse`, the end of the last step (scaling
-    exponent `prev`) is the start of this one when the scaling did not change."""
-    e, tau = scaling(P, tk) if scaled else (0, 0.0)
+def _scale(P, t, scaled, prev, tau, up, down):
+    """The scaling (e, tau, 2^e, 2^-e) of the step from t, e = 0 without `scaled` (a run whose range
+    needs none: scenes.base.Scene.needs_scaling), given the last step's exponent `prev` and its
+    tau and factors: recomputed only where e changed. That branch keeps the coefficients' times
+    from waiting on a division every step (measured: 4 ns of a 26 ns damped midpoint step)."""
+    e = scaling(P, t) if scaled else 0
+    if e != prev:
+        tau = shift(P, e)
+        up, down = _factors(e)
+    return e, tau, up, down
+
+
+@njit(**INLINE)
+def scaling_at(P, t):
+    """(e, tau) of the step from t."""
+    e = scaling(P, t)
+    return e, shift(P, e)
+
+
+@njit(**INLINE)
+def _coefs(P, offsets, tk, tk1, h, tau, C, reuse):
+    """Time coefficients at the offsets of the step from tk to tk1, read at the scene's time
+    shifted by tau. With `reuse`, the end of the last step (same scaling) is the start of this
+    one."""
     u = len(offsets)
     for j in range(u):
-        if j == 0 and reuse and e == prev:
+        if j == 0 and reuse:
             for c in range(ncoef(P)):
                 C[0, c] = C[u - 1, c]
         else:
             coef(P, (tk1 if offsets[j] == 1.0 else tk + offsets[j] * h) - tau, C, j)
-    return e, tau
 
 
 @njit(**INLINE)
@@ -155,12 +173,12 @@ def propagate_matrix(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZre
     S, Cc = PT.copy(), np.zeros_like(PT)
     rec = 1
     prev = 0
+    tau = 0.0
     up = down = 1.0
     for k in range(nsteps):
-        e, tau = _coefs(P, D.offsets, t0 + k * h, t0 + (k + 1) * h, h, C, can_reuse and k > 0, prev, scaled)
-        if e != prev:
-            up, down = _factors(e)
-            prev = e
+        e, tau, up, down = _scale(P, t0 + k * h, scaled, prev, tau, up, down)
+        _coefs(P, D.offsets, t0 + k * h, t0 + (k + 1) * h, h, tau, C, can_reuse and k > 0 and e == prev)
+        prev = e
         tk = t0 + k * h - tau
         s = lmatrix(D, P, C, tk, h, M, Q, LW)
         recording = (k + 1) % stride == 0 or k + 1 == nsteps
@@ -194,12 +212,12 @@ def propagate_members(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZr
     S, Cc = PT.copy(), np.zeros_like(PT)
     rec = 1
     prev = 0
+    tau = 0.0
     up = down = 1.0
     for k in range(nsteps):
-        e, tau = _coefs(P, D.offsets, t0 + k * h, t0 + (k + 1) * h, h, C, can_reuse and k > 0, prev, scaled)
-        if e != prev:
-            up, down = _factors(e)
-            prev = e
+        e, tau, up, down = _scale(P, t0 + k * h, scaled, prev, tau, up, down)
+        _coefs(P, D.offsets, t0 + k * h, t0 + (k + 1) * h, h, tau, C, can_reuse and k > 0 and e == prev)
+        prev = e
         tk = t0 + k * h - tau
         recording = (k + 1) % stride == 0 or k + 1 == nsteps
         for i in range(Z.shape[0]):
@@ -231,7 +249,8 @@ def tangent_matrix(D, P, h, T, Z, PT, M):
     LW = lwork(D, P)
     Q = matrices(P, 1, 0.0)[0]
     for k in range(T.shape[0]):
-        tau = _coefs(P, D.offsets, T[k], T[k] + h, h, C, False, 0)[1]
+        tau = scaling_at(P, T[k])[1]
+        _coefs(P, D.offsets, T[k], T[k] + h, h, tau, C, False)
         lmatrix(D, P, C, T[k] - tau, h, M[k], Q, LW)
     return OK, T.shape[0]
 
@@ -248,7 +267,8 @@ def tangent_complex(D, P, h, T, Z, PT, M):
     m = 2 * ndof(P)
     zs = vectors(P, 1, 0.0)[0]
     for k in range(Z.shape[0]):
-        e, tau = _coefs(P, D.offsets, T[k], T[k] + h, h, C, False, 0)
+        e, tau = scaling_at(P, T[k])
+        _coefs(P, D.offsets, T[k], T[k] + h, h, tau, C, False)
         for r in range(m):
             zs[r] = Z[k, r]
         up, down = _factors(e)
@@ -283,7 +303,7 @@ def energies(P, T, Z, out):
     C = np.empty((1, ncoef(P)))
     zs = np.empty(Z.shape[2])
     for k in range(T.shape[0]):
-        e, tau = scaling(P, T[k])
+        e, tau = scaling_at(P, T[k])
         up, down = _factors(e)
         coef(P, T[k] - tau, C, 0)
         for i in range(Z.shape[1]):
@@ -297,7 +317,7 @@ def vector_field(P, t, z, out):
     """The extended vector field (dq/dt, dp/dt, dp_t/dt) at (z, t), for reference solvers."""
     n = ndof(P)
     C = np.empty((1, ncoef(P)))
-    e, tau = scaling(P, t)
+    e, tau = scaling_at(P, t)
     coef(P, t - tau, C, 0)
     zs = z.copy()
     up, down = _factors(e)

@@ -1,25 +1,30 @@
-"""The fused driver's compiled loops: step, form each step's tangent map, reduce the diagnostics.
+"""The fused driver's compiled loop: step, form each step's tangent map, reduce the diagnostics.
 
-One pass per call, nothing stored per step: member 0's one-step tangent map M_k (the step
-matrix on a linear scene, a complex step of the member step otherwise, in the step's scaled
-coordinates as kernels.loops.tangent_matrix and tangent_complex give it) feeds the running
-maxima of |det M_k - 1| and of the symplecticity defect, and the growth product; H + p_t of
-member 0 feeds its running maximum; with 2n + 2 members, members 1..2n+1 give the paper's
-volume estimator det[X^1 ... X^(2n+1)] of their increments; and each of these is also reduced
-to per-bin minima and maxima over bins of `width` steps. No state is recorded: the members'
-states Z and p_t PT are advanced in place.
+One pass per call, nothing stored per step. The members take member steps, as
+kernels.loops.propagate_members does, so a fused run's states are those of `simulate`, on a
+linear scene too (stepping by the step matrix instead gave p_t through its quadratic form
+z.Q z/2, whose round-off grows with the spread of Q's entries: the splittings' Q, read off by
+polarization, made |H + p_t| of blanes-moan6 on damped grow to 5e-3 by gamma t = 40 with
+unscaled steps, and 1000x the member steps' round-off with scaled ones). Member 0's one-step
+tangent map M_k (the step matrix on a linear scene, a complex step of the member step
+otherwise, in the step's scaled coordinates as kernels.loops.tangent_matrix and tangent_complex
+give it) feeds the running maxima of |det M_k - 1| and of the symplecticity defect, and the
+growth product; H + p_t of member 0 feeds its running maximum; with 2n + 2 members, members
+1..2n+1 give the paper's volume estimator det[X^1 ... X^(2n+1)] of their increments; and each of
+these is also reduced to per-bin minima and maxima over bins of `width` steps. No state is
+recorded: the members' states Z and p_t PT are advanced in place.
 
-Arguments shared by both loops: D, P, t0, h, Z, PT, nsteps as kernels.loops.propagate_members
+Arguments of the loop (_fused): D, P, t0, h, Z, PT, nsteps as kernels.loops.propagate_members
 takes them; first: the steps are numbered from `first`, at times t0 + (first + k) h, and S, Cc:
 p_t's compensated sum and its compensation, carried from call to call, so that a run cut into
-calls takes the same steps as one call; every: form member 0's tangent map at the steps k with k % every == 0 (0:
-never); want: which figures to reduce (WANT_H: H + p_t; WANT_MAPS: det and symplecticity of the
-maps), the growth product being kept wherever G is given; scaled: whether the run's range needs
-the scene's scaled steps (scenes.base.Scene.needs_scaling);
+calls takes the same steps as one call; every: form member 0's tangent map at the steps k with
+k % every == 0 (0: never); want: which figures to reduce (WANT_H: H + p_t; WANT_MAPS: det and
+symplecticity of the maps), the growth product being kept wherever G is given; scaled: whether
+the run's range needs the scene's scaled steps (scenes.base.Scene.needs_scaling);
 acc: running maxima (ACC_*), updated in place; env: (bins, len(ENV)) per-bin reductions of this
 call (bin b holds steps b*width .. (b+1)*width - 1; rows preset by the caller), tb (bins,) the
 time after each bin's first step; G: the growth product (m x m, or 0 x 0 for none) and gstate
-its (log scale, exponent, 1.0 while finite) as in diagnostics.MapGrowth. Each returns
+its (log scale, exponent, 1.0 while finite) as in diagnostics.MapGrowth. It returns
 (status, k, in_tangent): k steps completed, and whether a failure came from the tangent map's
 complex step.
 """
@@ -34,6 +39,7 @@ from numba.np.unsafe.ndarray import to_fixed_tuple
 from .borrow import borrow
 from .dispatch import (
     _INLINE,
+    _IR_INLINE,
     INLINE,
     IR_INLINE,
     JIT,
@@ -43,12 +49,11 @@ from .dispatch import (
     lwork,
     ncoef,
     ndof,
-    scaling,
     step,
     work,
 )
 from .families import OK
-from .loops import COMPLEX_STEP, _accept, _add, _coefs, _factors, _rescale, apply_matrix
+from .loops import COMPLEX_STEP, _accept, _add, _coefs, _factors, _rescale, _scale, scaling_at
 from .stack import _scene, coef_table, matrices, vectors
 
 ACC = ("H_ext_max_abs", "det_max_dev", "symp_max_dev", "symp_max_rel")
@@ -210,15 +215,57 @@ def _reduce(k, width, t1, M, mapped, want, e, hext, X, volume, acc, env, tb, G, 
             env[b, 5] = _most(env[b, 5], symp)
 
 
+def tangent_work(D, P):
+    """Stack scratch of member 0's tangent map (_tangent)."""
+
+
+@overload(tangent_work, jit_options=_IR_INLINE, inline="always")
+def _tangent_work(D, P):
+    if _scene(P).linear:
+        return lambda D, P: (lwork(D, P), matrices(P, 1, 0.0)[0])
+    return lambda D, P: (work(D, P, 0j), vectors(P, 1, 0j)[0])
+
+
+def _tangent(D, P, C, tk, h, zs, pt, M, TW):
+    """Member 0's one-step tangent map M at the (scaled) state zs: the step matrix on a linear
+    scene, a complex step of the member step otherwise (kernels.loops.tangent_matrix and
+    tangent_complex). Returns the status."""
+
+
+@overload(_tangent, jit_options=_INLINE)
+def _tangent_impl(D, P, C, tk, h, zs, pt, M, TW):
+    if _scene(P).linear:
+        def matrix(D, P, C, tk, h, zs, pt, M, TW):
+            LW, Q = TW
+            lmatrix(D, P, C, tk, h, M, Q, LW)
+            return OK
+        return matrix
+
+    def complex_step(D, P, C, tk, h, zs, pt, M, TW):
+        Wc, zc = TW
+        m = zs.shape[0]
+        for j in range(m):
+            for r in range(m):
+                zc[r] = zs[r]
+            zc[j] += 1j * COMPLEX_STEP
+            status, _ = step(D, P, C, tk, h, zc, pt + 0j, Wc)
+            if status != OK:
+                return status
+            for r in range(m):
+                M[r, j] = zc[r].imag / COMPLEX_STEP
+        return OK
+    return complex_step
+
+
 @njit(**INLINE)
-def _members_run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, env, tb, G,
-                 gstate, scaled):
-    """Member steps (any scene); member 0's tangent map by complex step of its step."""
+def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, env, tb, G,
+           gstate, scaled):
+    """Member steps, as kernels.loops.propagate_members takes them (so a run's states are those
+    of `simulate`), and member 0's tangent map (_tangent) at the mapped steps."""
     C = coef_table(D, P)
     Ce = coef_table(D, P)
     W = work(D, P, 0.0)
-    Wc = work(D, P, 0j)
-    zc = vectors(P, 1, 0j)[0]
+    TW = tangent_work(D, P)
     V = vectors(P, 3, 0.0)
     z, old, zs = V[0], V[1], V[2]
     MB = matrices(P, 2, 0.0)
@@ -233,28 +280,22 @@ def _members_run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, a
     end = u - 1 if D.offsets[u - 1] == 1.0 else -1
     hnew = 0.0
     prev = 0
+    tau = 0.0
     up = down = 1.0
     for k in range(nsteps):
         g = first + k
-        e, tau = _coefs(P, D.offsets, t0 + g * h, t0 + (g + 1) * h, h, C, can_reuse and k > 0, prev, scaled)
-        if e != prev:
-            up, down = _factors(e)
-            prev = e
+        e, tau, up, down = _scale(P, t0 + g * h, scaled, prev, tau, up, down)
+        _coefs(P, D.offsets, t0 + g * h, t0 + (g + 1) * h, h, tau, C, can_reuse and k > 0 and e == prev)
+        prev = e
         tk = t0 + g * h - tau
         mapped = every > 0 and k % every == 0
         if mapped:
             for r in range(m):
                 zs[r] = Z[0, r]
             _rescale(zs, n, e, down, up)
-            for j in range(m):
-                for r in range(m):
-                    zc[r] = zs[r]
-                zc[j] += 1j * COMPLEX_STEP
-                status, _ = step(D, P, C, tk, h, zc, PT[0] + 0j, Wc)
-                if status != OK:
-                    return status, k, True
-                for r in range(m):
-                    M[r, j] = zc[r].imag / COMPLEX_STEP
+            status = _tangent(D, P, C, tk, h, zs, PT[0], M, TW)
+            if status != OK:
+                return status, k, True
         t1 = t0 + (g + 1) * h
         for i in range(Z.shape[0]):
             for r in range(m):
@@ -267,56 +308,6 @@ def _members_run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, a
             _rescale(z, n, e, up, down)
             sum_, comp = _add(S, Cc, i, dpt)
             status = _accept(status, i, z, old, sum_ + comp, Z, PT, 0, False, none, flat, none, m)
-            if status != OK:
-                return status, k, False
-            S[i], Cc[i] = sum_, comp
-            if volume and 1 <= i <= m + 1:
-                _increment_row(X, i - 1, z, old, h, n)
-        hext = hnew + PT[0]
-        _reduce(k, width, t1, M, mapped, want, e, hext, X, volume, acc, env, tb, G, B, gstate, m)
-    return OK, nsteps, False
-
-
-@njit(**INLINE)
-def _matrix_run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, env, tb, G,
-                gstate, scaled):
-    """A linear scene: one step matrix per step (kernels.linear), applied to every member, and
-    itself member 0's tangent map."""
-    C = coef_table(D, P)
-    Ce = coef_table(D, P)
-    LW = lwork(D, P)
-    MQ = matrices(P, 3, 0.0)
-    M, Q, B = MQ[0], MQ[1], MQ[2]
-    V = vectors(P, 3, 0.0)
-    z, old, zs = V[0], V[1], V[2]
-    m = 2 * ndof(P)
-    n = m // 2
-    X = np.empty((m + 1, m + 1))
-    volume = Z.shape[0] >= m + 2
-    none, flat = np.empty((0, 0, m)), np.empty((0, 0))  # no records
-    u = len(D.offsets)
-    can_reuse = u > 1 and D.offsets[0] == 0.0 and D.offsets[u - 1] == 1.0
-    end = u - 1 if D.offsets[u - 1] == 1.0 else -1
-    hnew = 0.0
-    prev = 0
-    up = down = 1.0
-    for k in range(nsteps):
-        g = first + k
-        e, tau = _coefs(P, D.offsets, t0 + g * h, t0 + (g + 1) * h, h, C, can_reuse and k > 0, prev, scaled)
-        if e != prev:
-            up, down = _factors(e)
-            prev = e
-        tk = t0 + g * h - tau
-        s = lmatrix(D, P, C, tk, h, M, Q, LW)
-        mapped = every > 0 and k % every == 0
-        t1 = t0 + (g + 1) * h
-        for i in range(Z.shape[0]):
-            quad = apply_matrix(Z, i, M, Q, old, zs, z, m, e, up, down)
-            if i == 0 and want & WANT_H:
-                hnew = _energy_after(P, C, end, Ce, t1 - tau, z)
-            _rescale(z, n, e, up, down)
-            sum_, comp = _add(S, Cc, i, -(0.5 * quad + s))
-            status = _accept(OK, i, z, old, sum_ + comp, Z, PT, 0, False, none, flat, none, m)
             if status != OK:
                 return status, k, False
             S[i], Cc[i] = sum_, comp
@@ -344,31 +335,13 @@ def _with_values(P, row):
 @njit(**INLINE)
 def _start(P, t, Z, Ce, zs, m):
     """H of member 0 of Z at t, as kernels.loops.energies evaluates it."""
-    e, tau = scaling(P, t)
+    e, tau = scaling_at(P, t)
     up, down = _factors(e)
     coef(P, t - tau, Ce, 0)
     for r in range(m):
         zs[r] = Z[0, r]
     _rescale(zs, m // 2, e, down, up)
     return energy(P, Ce, 0, zs)
-
-
-def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, env, tb, G,
-           gstate, scaled):
-    """The fused loop for the scene: _matrix_run on a linear one, else _members_run."""
-
-
-@overload(_fused, jit_options=_INLINE)
-def _fused_impl(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, env, tb, G,
-                gstate, scaled):
-    run = _matrix_run if _scene(P).linear else _members_run
-
-    def impl(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, env, tb, G,
-             gstate, scaled):
-        return run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, env, tb,
-                   G, gstate, scaled)
-
-    return impl
 
 
 @njit(**JIT)
