@@ -8,8 +8,8 @@
 
      -DSCENE=DECAYING|DAMPED|MODULATED|CHARGED|KAPITZA  -DNDOF=n -DNCOEF=k -DLINEAR=0|1
 
-   The sizes numba knows when it compiles (state size, coefficient count, a Gauss tableau's
-   stage count) are compile-time constants here too; the other families' data (tableau, weights,
+   The sizes numba knows when it compiles (state size, coefficient count, the stage count of a
+   Gauss tableau and of an explicit one of at most 4 stages) are compile-time constants here too; the other families' data (tableau, weights,
    gammas, offsets, and so the number of stages and offsets) arrive at run time as arrays, as
    numba receives them. Scene parameters
    are held by value, as numba holds its named tuple. The charged scene is the paper's
@@ -1016,18 +1016,30 @@ INLINE int propagate(int family, const Family *D, const Work *W,
 
 /* ---- entry points, one per family: the scene's parameters by value, the family's arrays ---- */
 
-int run_explicit(Loop *L, const double *params, const double *offsets, long u, const double *A,
-                 const double *b, const long *stage, long s)
+INLINE int explicit_run(Loop *L, const double *params, const double *offsets, int u, const double *A,
+                        const double *b, const long *stage, int s)
 {
     Params P = *(const Params *)params;
-    Family D = {.offsets = offsets, .u = (int)u};
+    Family D = {.offsets = offsets, .u = u};
     D.A = A;
     D.b = b;
     D.stage = stage;
-    D.s = (int)s;
+    D.s = s;
     double K[LINEAR ? s * M * M : s * M];
     Work W = {.K = K};
     return propagate(EXPLICIT, &D, &W, &P, L);
+}
+
+/* numba compiles a tableau of at most 4 stages per (stages, nodes) (methods.FIXED_STAGES: its
+   data are tuples): so is this, for the registered ones (Euler, RK4); longer ones at run time */
+int run_explicit(Loop *L, const double *params, const double *offsets, long u, const double *A,
+                 const double *b, const long *stage, long s)
+{
+    if (s == 1 && u == 1)
+        return explicit_run(L, params, offsets, 1, A, b, stage, 1);
+    if (s == 4 && u == 3)
+        return explicit_run(L, params, offsets, 3, A, b, stage, 4);
+    return explicit_run(L, params, offsets, (int)u, A, b, stage, (int)s);
 }
 
 INLINE int gauss_run(Loop *L, const double *params, const double *offsets, const double *A,

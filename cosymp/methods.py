@@ -18,15 +18,23 @@ def _floats(x):
     return np.ascontiguousarray(np.ravel(x), dtype=float)
 
 
-def _fixed(x):
-    """Floats as a tuple, whose length is part of its numba type: a loop compiled for it knows the
-    count at compile time (the Gauss methods' stages, and so the size of their Newton solve, which
-    unrolled runs 1.5-1.8x faster than sized at run time: measured with cosymp bench)."""
-    return tuple(float(v) for v in np.ravel(x))
+def _fixed(x, kind=float):
+    """Numbers as a tuple, whose length is part of its numba type: a loop compiled for it knows the
+    count at compile time and unrolls it (the Gauss methods' stages, and so the size of their
+    Newton solve: 1.5-1.8x faster steps; Euler's and RK4's: 1.1-1.35x. Measured with cosymp
+    bench and benchmarks/plain.py)."""
+    return tuple(kind(v) for v in np.ravel(x))
+
+
+FIXED_STAGES = 4
+"""Explicit tableaus of at most this many stages are tuples. RK8's 12 stages stay arrays: unrolled,
+its 66 stage couplings cost more than they save (modulated 175 -> 275 ns a step)."""
 
 
 def _explicit(A, b, c):
     offsets, stage = np.unique(np.asarray(c, float), return_inverse=True)
+    if len(b) <= FIXED_STAGES:
+        return Explicit(_fixed(A), _fixed(b), _fixed(stage, int), _fixed(offsets))
     return Explicit(_floats(A), _floats(b), stage.astype(np.int64), offsets)
 
 

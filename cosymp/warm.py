@@ -1,7 +1,7 @@
 """Compiling the kernels ahead of use: in one process per core, in units, with progress.
 
-numba compiles each generic loop once per (scene, method family), a family whose data are
-tuples (Gauss) once per length of its tuples, and keeps it in its disk cache (kernels.cachestamp).
+numba compiles each generic loop once per (scene, method family), tableaus that are tuples (Gauss,
+Euler, RK4: methods._fixed) once per length, and keeps it in its disk cache (kernels.cachestamp).
 A *unit* is everything one (scene, family) pair needs: its loops for one trajectory and for
 ensembles, its tangent maps, the scene's energies and vector field, the map product. The `common` unit holds what building a setup compiles (the charged scene's beta(t),
 which its initial state needs). A compiled unit leaves a marker beside the cache, and so does a
@@ -56,7 +56,7 @@ class Unit:
         from numba import typeof
 
         compiled = set()
-        for name in self.methods:  # each data type of the family (the Gauss methods: one per stage count)
+        for name in self.methods:  # each data type of the family (tuples: one per length)
             setup = Setup.make(self.scene, name)
             if typeof(setup.data) not in compiled:
                 compiled.add(typeof(setup.data))

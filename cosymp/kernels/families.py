@@ -4,8 +4,9 @@ A step advances one trajectory of the extended state (q, t, p, p_t) by h, given 
 time coefficients at the family's time offsets (row j of C at t + offsets[j] h, shared by every
 member of an ensemble). z = (q, p) is updated in place; the new p_t is returned with a status.
 Family data are arrays, so that every tableau of a family runs one compiled loop, its stack
-scratch sized by kernels.stack's bounds; the Gauss tableaus are tuples instead, so that the size
-of their Newton solve is known at compile time (one loop per stage count, see methods._fixed). Linear scenes use the same families as matrices (kernels.linear).
+scratch sized by kernels.stack's bounds; the Gauss tableaus and the explicit ones of at most
+methods.FIXED_STAGES stages are tuples instead, so that their stage count (and the size of the
+Gauss Newton solve) is known at compile time: one loop per stage count, see methods._fixed. Linear scenes use the same families as matrices (kernels.linear).
 """
 from collections import namedtuple
 

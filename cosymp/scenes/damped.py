@@ -18,7 +18,7 @@ def coef(P, t, C, r):
     grow = np.exp(P.gamma * t)
     kin = grow / P.m
     pot = P.m * P.w0 / grow
-    C[r, :] = 0.0
+    quadratic.clear(P, C, r)
     C[r, 0] = pot
     C[r, 3] = kin
     C[r, 4] = -P.gamma * pot
