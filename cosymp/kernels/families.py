@@ -33,6 +33,7 @@ from .linalg import solve
 from .stack import matrices, stage_flat, stage_square, stage_vectors, vectors
 
 OK, OVERFLOW, NEWTON, SINGULAR = 0, 1, 2, 3
+START = -1  # H is not finite at the start: no step taken
 NEWTON_MAX = 50
 NEWTON_TOL = 4e-15
 

@@ -27,7 +27,7 @@ from .dispatch import (
     step,
     work,
 )
-from .families import OK, OVERFLOW
+from .families import OK, OVERFLOW, START
 from .stack import coef_table, matrices, vectors
 
 COMPLEX_STEP = 1e-50
@@ -148,18 +148,57 @@ def _add(S, Cc, i, d):
     return s, c
 
 
-@njit(**JIT)
-def propagate_matrix(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, scaled):
-    """Advance the N members of (Z, PT) of a linear scene by nsteps steps of h from t0.
+@njit(**INLINE)
+def coef_at(P, t, C):
+    """Row 0 of C at t, read at the step's shifted time; returns that step's (e, 2^e, 2^-e)."""
+    e, tau = scaling_at(P, t)
+    coef(P, t - tau, C, 0)
+    up, down = _factors(e)
+    return e, up, down
 
-    One step matrix (M, Q, s) per step (kernels.linear), applied to every member:
-    z <- M z, p_t <- p_t - (z.Q z / 2 + s). Records every stride-th state (index j is step
-    j*stride, index 0 the start) and the final state (one more record when stride does not divide
-    nsteps) and, when dZrec is non-empty, the increment z_k - z_(k-1) of the step before each record;
-    `scaled`: whether the run's range needs the scene's scaled steps. Returns (status, k): k steps completed; on failure step
-    k -> k+1 failed and the records hold every recorded state before it.
-    """
-    D, P, Z, PT, Trec, Zrec, PTrec, dZrec = borrow((D, P, Z, PT, Trec, Zrec, PTrec, dZrec))
+
+@njit(**INLINE)
+def energy_at(P, C, z, zs, e, up, down):
+    """H of the state z (copied into zs and scaled: H is invariant under the scaling) from row 0
+    of C, given coef_at's scaling."""
+    for r in range(zs.shape[0]):
+        zs[r] = z[r]
+    _rescale(zs, zs.shape[0] // 2, e, down, up)
+    return energy(P, C, 0, zs)
+
+
+@njit(**INLINE)
+def _energies(P, T, Z, out, C, zs):
+    """H of the members Z (K, N, 2n) at the times T (K,) into out (K, N)."""
+    for k in range(T.shape[0]):
+        e, up, down = coef_at(P, T[k], C)
+        for i in range(Z.shape[1]):
+            out[k, i] = energy_at(P, C, Z[k, i], zs, e, up, down)
+
+
+@njit(**INLINE)
+def _run(loop, D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, Hrec, scaled, start):
+    """A compiled loop's call: with `start`, p_t = -H(z, t0) first (START if not finite); then the
+    loop; then H of the recorded states into Hrec (where it has rows). One compiled call per run:
+    each call from Python costs microseconds."""
+    D, P, Z, PT, Trec, Zrec, PTrec, dZrec, Hrec = borrow((D, P, Z, PT, Trec, Zrec, PTrec, dZrec, Hrec))
+    C = coef_table(D, P)
+    zs = vectors(P, 1, 0.0)[0]
+    if start:
+        e, up, down = coef_at(P, t0, C)
+        for i in range(Z.shape[0]):
+            H0 = energy_at(P, C, Z[i], zs, e, up, down)
+            if not np.isfinite(H0):
+                return START, 0
+            PT[i] = -H0
+    status, k, rec = loop(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, scaled)
+    if Hrec.shape[0] > 0:
+        _energies(P, Trec[:rec], Zrec[:rec], Hrec[:rec], C, zs)
+    return status, k
+
+
+@njit(**INLINE)
+def _matrix_loop(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, scaled):
     C = coef_table(D, P)
     LW = lwork(D, P)
     MQ = matrices(P, 2, 0.0)
@@ -188,19 +227,16 @@ def propagate_matrix(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZre
             sum_, comp = _add(S, Cc, i, -(0.5 * quad + s))
             status = _accept(OK, i, z, old, sum_ + comp, Z, PT, rec, recording, Zrec, PTrec, dZrec, m)
             if status != OK:
-                return status, k
+                return status, k, rec
             S[i], Cc[i] = sum_, comp
         if recording:
             Trec[rec] = t0 + (k + 1) * h
             rec += 1
-    return OK, nsteps
+    return OK, nsteps, rec
 
 
-@njit(**JIT)
-def propagate_members(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, scaled):
-    """As propagate_matrix, for any scene: each member takes the family's step (Newton where
-    the method is implicit). p_t is summed with compensation in both (`_add`)."""
-    D, P, Z, PT, Trec, Zrec, PTrec, dZrec = borrow((D, P, Z, PT, Trec, Zrec, PTrec, dZrec))
+@njit(**INLINE)
+def _members_loop(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, scaled):
     C = coef_table(D, P)
     W = work(D, P, 0.0)
     V = vectors(P, 2, 0.0)
@@ -231,12 +267,35 @@ def propagate_members(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZr
             sum_, comp = _add(S, Cc, i, dpt)
             status = _accept(status, i, z, old, sum_ + comp, Z, PT, rec, recording, Zrec, PTrec, dZrec, m)
             if status != OK:
-                return status, k
+                return status, k, rec
             S[i], Cc[i] = sum_, comp
         if recording:
             Trec[rec] = t0 + (k + 1) * h
             rec += 1
-    return OK, nsteps
+    return OK, nsteps, rec
+
+
+@njit(**JIT)
+def propagate_matrix(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, Hrec, scaled, start):
+    """Advance the N members of (Z, PT) of a linear scene by nsteps steps of h from t0.
+
+    One step matrix (M, Q, s) per step (kernels.linear), applied to every member:
+    z <- M z, p_t <- p_t - (z.Q z / 2 + s). Records every stride-th state (index j is step
+    j*stride, index 0 the start) and the final state (one more record when stride does not divide
+    nsteps) and, when dZrec is non-empty, the increment z_k - z_(k-1) of the step before each
+    record; H of each recorded state into Hrec where it has rows; with `start`, p_t starts at
+    -H(z, t0). `scaled`: whether the run's range needs the scene's scaled steps. Returns
+    (status, k): k steps completed; on failure step k -> k+1 failed and the records hold every
+    recorded state before it; START (no step) where H is not finite at the start.
+    """
+    return _run(_matrix_loop, D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, Hrec, scaled, start)
+
+
+@njit(**JIT)
+def propagate_members(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, Hrec, scaled, start):
+    """As propagate_matrix, for any scene: each member takes the family's step (Newton where
+    the method is implicit). p_t is summed with compensation in both (`_add`)."""
+    return _run(_members_loop, D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, Hrec, scaled, start)
 
 
 @njit(**JIT)
@@ -300,16 +359,7 @@ def tangent(setup):
 @njit(**JIT)
 def energies(P, T, Z, out):
     """H at recorded states: T (K,), Z (K, N, 2n) -> out (K, N)."""
-    C = np.empty((1, ncoef(P)))
-    zs = np.empty(Z.shape[2])
-    for k in range(T.shape[0]):
-        e, tau = scaling_at(P, T[k])
-        up, down = _factors(e)
-        coef(P, T[k] - tau, C, 0)
-        for i in range(Z.shape[1]):
-            zs[:] = Z[k, i]
-            _rescale(zs, Z.shape[2] // 2, e, down, up)
-            out[k, i] = energy(P, C, 0, zs)
+    _energies(P, T, Z, out, np.empty((1, ncoef(P))), np.empty(Z.shape[2]))
 
 
 @njit(**JIT)

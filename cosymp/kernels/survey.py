@@ -47,20 +47,18 @@ from .dispatch import (
     energy,
     lmatrix,
     lwork,
-    ncoef,
     ndof,
     step,
     work,
 )
-from .families import OK
-from .loops import COMPLEX_STEP, _accept, _add, _coefs, _factors, _rescale, _scale, scaling_at
+from .families import OK, START
+from .loops import COMPLEX_STEP, _accept, _add, _coefs, _rescale, _scale, coef_at, energy_at
 from .stack import _scene, coef_table, matrices, vectors
 
 ACC = ("H_ext_max_abs", "det_max_dev", "symp_max_dev", "symp_max_rel")
 WANT_H, WANT_MAPS = 1, 2
 RANGE = 64
 LN2 = math.log(2.0)
-START = -1
 ENV = ("H_min", "H_max", "vol_min", "vol_max", "det", "symp")
 
 
@@ -332,18 +330,6 @@ def _with_values(P, row):
     return lambda P, row: cls(*to_fixed_tuple(row, count))
 
 
-@njit(**INLINE)
-def _start(P, t, Z, Ce, zs, m):
-    """H of member 0 of Z at t, as kernels.loops.energies evaluates it."""
-    e, tau = scaling_at(P, t)
-    up, down = _factors(e)
-    coef(P, t - tau, Ce, 0)
-    for r in range(m):
-        zs[r] = Z[0, r]
-    _rescale(zs, m // 2, e, down, up)
-    return energy(P, Ce, 0, zs)
-
-
 @njit(**JIT)
 def survey(D, P, R, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, env, tb, G,
            gstate, status, scaled, start):
@@ -358,13 +344,13 @@ def survey(D, P, R, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc,
     if the failure came from the tangent map's complex step)."""
     D, P, R, Z, PT, S, Cc, acc, env, tb, G, gstate, status = borrow(
         (D, P, R, Z, PT, S, Cc, acc, env, tb, G, gstate, status))
-    m = 2 * ndof(P)
-    Ce = np.empty((1, ncoef(P)))
-    zs = np.empty(m)
+    Ce = coef_table(D, P)
+    zs = vectors(P, 1, 0.0)[0]
     for b in range(Z.shape[0]):
         Pb = with_values(P, R[b]) if R.shape[0] > 0 else P
         if start:
-            H0 = _start(Pb, t0 + first * h, Z[b], Ce, zs, m)
+            e, up, down = coef_at(Pb, t0 + first * h, Ce)
+            H0 = energy_at(Pb, Ce, Z[b, 0], zs, e, up, down)
             if not np.isfinite(H0):
                 status[b, 0], status[b, 1], status[b, 2] = START, 0, 0
                 continue
