@@ -124,19 +124,19 @@ def symplecticity(M, m):
 
 
 @njit(**IR_INLINE)
-def grow(M, e, A, B, state, m):
+def grow(M, e, A, B, m, scale, exponent):
     """A <- M A, scaled by an exact power of two 2^-x once its largest entry leaves [2^-RANGE,
-    2^RANGE] (x ln 2 added to state[0]: no logarithm per step); A is kept in the scaled
-    coordinates of exponent state[1] (see diagnostics.MapGrowth). False if not finite."""
+    2^RANGE] (x ln 2 added to `scale`: no logarithm per step); A is kept in the scaled coordinates
+    of `exponent` (see diagnostics.MapGrowth). Returns (finite, scale, exponent)."""
     n = m // 2
-    shift = e - int(state[1])
+    shift = e - exponent
     if shift != 0:
         qf, pf = math.ldexp(1.0, -shift), math.ldexp(1.0, shift)
         for i in range(n):
             for j in range(m):
                 A[i, j] *= qf
                 A[n + i, j] *= pf
-        state[1] = e
+        exponent = e
     big = 0.0
     for i in range(m):
         for j in range(m):
@@ -144,20 +144,20 @@ def grow(M, e, A, B, state, m):
             for r in range(m):
                 s += M[i, r] * A[r, j]
             if not np.isfinite(s):
-                return False
+                return False, scale, exponent
             B[i, j] = s
             big = max(big, abs(s))
     if big == 0.0:
-        return False
+        return False, scale, exponent
     f = 1.0
     if not (2.0 ** -RANGE < big < 2.0 ** RANGE):
         x = math.frexp(big)[1]
         f = math.ldexp(1.0, -x)
-        state[0] += x * LN2
+        scale += x * LN2
     for i in range(m):
         for j in range(m):
             A[i, j] = B[i, j] * f
-    return True
+    return True, scale, exponent
 
 
 @njit(**INLINE)
@@ -178,39 +178,6 @@ def _increment_row(X, i, z, old, h, n):
         X[i, r] = z[r] - old[r]
         X[i, n + 1 + r] = z[n + r] - old[n + r]
     X[i, n] = h
-
-
-@njit(**IR_INLINE)
-def _reduce(k, width, t1, M, mapped, want, e, hext, X, volume, acc, env, tb, G, B, gstate, m):
-    """Fold one step's wanted figures into acc, its bin and the growth product (gstate[2] = 0
-    once that product stopped being finite)."""
-    if want & WANT_H:
-        acc[0] = _most(acc[0], abs(hext))
-    dev = symp = 0.0
-    if mapped and want & WANT_MAPS:
-        for i in range(m):
-            for j in range(m):
-                B[i, j] = M[i, j]
-        dev = abs(determinant(B, m) - 1.0)
-        symp, rel = symplecticity(M, m)
-        acc[1] = _most(acc[1], dev)
-        acc[2] = _most(acc[2], symp)
-        acc[3] = _most(acc[3], rel)
-    if mapped and G.shape[0] > 0 and gstate[2] == 1.0 and not grow(M, e, G, B, gstate, m):
-        gstate[2] = 0.0
-    if width > 0:
-        b = k // width
-        if k % width == 0:
-            tb[b] = t1
-        env[b, 0] = _least(env[b, 0], hext)
-        env[b, 1] = _most(env[b, 1], hext)
-        if volume:
-            vol = determinant(X, m + 1)
-            env[b, 2] = _least(env[b, 2], vol)
-            env[b, 3] = _most(env[b, 3], vol)
-        if mapped:
-            env[b, 4] = _most(env[b, 4], dev)
-            env[b, 5] = _most(env[b, 5], symp)
 
 
 def tangent_work(D, P):
@@ -255,19 +222,40 @@ def _tangent_impl(D, P, C, tk, h, zs, pt, M, TW):
     return complex_step
 
 
+@njit(**IR_INLINE)
+def _copy(A, B, m):
+    """B <- A (m x m)."""
+    for i in range(m):
+        for j in range(m):
+            B[i, j] = A[i, j]
+
+
+@njit(**IR_INLINE)
+def _flush(env, tb, b, t, bin_):
+    """Bin b's time and figures (min and max of H + p_t and of the volume estimator, max of the
+    defects) into tb and env (rows preset to the identities of min and max)."""
+    if b >= 0:
+        tb[b] = t
+        for j in range(6):
+            env[b, j] = bin_[j]
+
+
 @njit(**INLINE)
 def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, env, tb, G,
            gstate, scaled):
     """Member steps, as kernels.loops.propagate_members takes them (so a run's states are those
-    of `simulate`), and member 0's tangent map (_tangent) at the mapped steps."""
+    of `simulate`), and member 0's tangent map (_tangent) at the mapped steps. The figures are
+    reduced in local variables and a stack copy of the growth product, written back once per
+    call (stored into the arrays every step, they cost 6-10 ns a step: the compiler must assume
+    those stores change the states it keeps in registers)."""
     C = coef_table(D, P)
     Ce = coef_table(D, P)
     W = work(D, P, 0.0)
     TW = tangent_work(D, P)
     V = vectors(P, 3, 0.0)
     z, old, zs = V[0], V[1], V[2]
-    MB = matrices(P, 2, 0.0)
-    M, B = MB[0], MB[1]
+    MB = matrices(P, 3, 0.0)
+    M, B, A = MB[0], MB[1], MB[2]
     m = 2 * ndof(P)
     n = m // 2
     X = np.empty((m + 1, m + 1))
@@ -276,6 +264,14 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
     u = len(D.offsets)
     can_reuse = u > 1 and D.offsets[0] == 0.0 and D.offsets[u - 1] == 1.0
     end = u - 1 if D.offsets[u - 1] == 1.0 else -1
+    hmax, dmax, smax, rmax = acc[0], acc[1], acc[2], acc[3]
+    growing = G.shape[0] > 0 and gstate[2] == 1.0
+    if growing:
+        _copy(G, A, m)
+    gscale, gexp = gstate[0], int(gstate[1])
+    bin_ = np.empty(6)  # the current bin's figures (as env's columns)
+    b, tbin = -1, 0.0
+    status, done, in_tangent = OK, nsteps, False
     hnew = 0.0
     prev = 0
     tau = 0.0
@@ -293,7 +289,8 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
             _rescale(zs, n, e, down, up)
             status = _tangent(D, P, C, tk, h, zs, PT[0], M, TW)
             if status != OK:
-                return status, k, True
+                done, in_tangent = k, True
+                break
         t1 = t0 + (g + 1) * h
         for i in range(Z.shape[0]):
             for r in range(m):
@@ -307,13 +304,48 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
             sum_, comp = _add(S, Cc, i, dpt)
             status = _accept(status, i, z, old, sum_ + comp, Z, PT, 0, False, none, flat, none, m)
             if status != OK:
-                return status, k, False
+                break
             S[i], Cc[i] = sum_, comp
             if volume and 1 <= i <= m + 1:
                 _increment_row(X, i - 1, z, old, h, n)
+        if status != OK:
+            done = k
+            break
         hext = hnew + PT[0]
-        _reduce(k, width, t1, M, mapped, want, e, hext, X, volume, acc, env, tb, G, B, gstate, m)
-    return OK, nsteps, False
+        if want & WANT_H:
+            hmax = _most(hmax, abs(hext))
+        dev = symp = 0.0
+        if mapped and want & WANT_MAPS:
+            _copy(M, B, m)
+            dev = abs(determinant(B, m) - 1.0)
+            symp, rel = symplecticity(M, m)
+            dmax, smax, rmax = _most(dmax, dev), _most(smax, symp), _most(rmax, rel)
+        if mapped and growing:
+            growing, gscale, gexp = grow(M, e, A, B, m, gscale, gexp)
+        if width > 0:
+            if k % width == 0:
+                _flush(env, tb, b, tbin, bin_)
+                b, tbin = k // width, t1
+                for j in range(6):
+                    bin_[j] = env[b, j]
+            bin_[0] = _least(bin_[0], hext)
+            bin_[1] = _most(bin_[1], hext)
+            if volume:
+                vol = determinant(X, m + 1)
+                bin_[2] = _least(bin_[2], vol)
+                bin_[3] = _most(bin_[3], vol)
+            if mapped:
+                bin_[4] = _most(bin_[4], dev)
+                bin_[5] = _most(bin_[5], symp)
+    if width > 0:
+        _flush(env, tb, b, tbin, bin_)
+    acc[0], acc[1], acc[2], acc[3] = hmax, dmax, smax, rmax
+    if G.shape[0] > 0:
+        if growing:
+            _copy(A, G, m)
+        gstate[0], gstate[1] = gscale, gexp
+        gstate[2] = 1.0 if growing else 0.0
+    return status, done, in_tangent
 
 
 def with_values(P, row):
