@@ -101,13 +101,31 @@ def determinant(A, m):
 
 
 @njit(**IR_INLINE)
+def _copy(A, B, m):
+    """B <- A (m x m)."""
+    for i in range(m):
+        for j in range(m):
+            B[i, j] = A[i, j]
+
+
+@njit(**INLINE)
+def _relative(worst, size):
+    """worst / size, inf where size is 0 (M = 0), NaN where worst is."""
+    if math.isnan(worst):
+        return math.nan
+    return worst / size if size > 0.0 else math.inf
+
+
+@njit(**IR_INLINE)
 def symplecticity(M, m):
     """(||M^T J M - J||_max, the same divided by the largest sum of |terms| that make up an entry
     of M^T J M): the absolute defect and a scale-free one (round-off level for a symplectic map
-    whatever the size of M, the method's own defect otherwise)."""
+    whatever the size of M, the method's own defect otherwise). The maxima are plain ones, a NaN
+    being caught by one flag (a NaN-keeping max per entry cost 2 ns of a damped midpoint step)."""
     n = m // 2
     worst = 0.0
     size = 0.0
+    nan = False
     for i in range(m):
         for j in range(m):
             v = 0.0
@@ -118,9 +136,29 @@ def symplecticity(M, m):
                 v += a - b
                 s += abs(a) + abs(b)
             target = 1.0 if j == i + n else (-1.0 if i == j + n else 0.0)
-            worst = _most(worst, abs(v - target))
-            size = _most(size, s)
-    return worst, worst / size if size > 0.0 else math.inf
+            d = abs(v - target)
+            nan |= math.isnan(d)
+            worst = max(worst, d)
+            size = max(size, s)
+    if nan:
+        worst = math.nan
+    return worst, _relative(worst, size)
+
+
+@njit(**IR_INLINE)
+def defects(M, B, m):
+    """(|det M - 1|, symplecticity(M)) of a one-step map M (B: scratch). With one degree of
+    freedom M^T J M = det(M) J, so the defect is |det M - 1|: both from the two products that
+    symplecticity forms (its figures bit for bit; det to round-off of the LU's), which halves the
+    maps' cost of a damped midpoint step (run_summary's figures 39 -> 35 ns/step)."""
+    if m == 2:
+        x, y = M[0, 0] * M[1, 1], M[1, 0] * M[0, 1]
+        dev = abs((x - y) - 1.0)
+        size = max(abs(x) + abs(y), 2.0 * abs(M[0, 0] * M[1, 0]), 2.0 * abs(M[0, 1] * M[1, 1]))
+        return dev, dev, _relative(dev, size)
+    _copy(M, B, m)
+    symp, rel = symplecticity(M, m)
+    return abs(determinant(B, m) - 1.0), symp, rel
 
 
 @njit(**IR_INLINE)
@@ -223,14 +261,6 @@ def _tangent_impl(D, P, C, tk, h, zs, pt, M, TW):
 
 
 @njit(**IR_INLINE)
-def _copy(A, B, m):
-    """B <- A (m x m)."""
-    for i in range(m):
-        for j in range(m):
-            B[i, j] = A[i, j]
-
-
-@njit(**IR_INLINE)
 def _flush(env, tb, b, t, bin_):
     """Bin b's time and figures (min and max of H + p_t and of the volume estimator, max of the
     defects) into tb and env (rows preset to the identities of min and max)."""
@@ -316,9 +346,7 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
             hmax = _most(hmax, abs(hext))
         dev = symp = 0.0
         if mapped and want & WANT_MAPS:
-            _copy(M, B, m)
-            dev = abs(determinant(B, m) - 1.0)
-            symp, rel = symplecticity(M, m)
+            dev, symp, rel = defects(M, B, m)
             dmax, smax, rmax = _most(dmax, dev), _most(smax, symp), _most(rmax, rel)
         if mapped and growing:
             growing, gscale, gexp = grow(M, e, A, B, m, gscale, gexp)
