@@ -8,8 +8,9 @@ timed in one process, interleaved, best of R, after an untimed warm-up:
 * C: a plain C -O3 implicit-midpoint loop for this scene (two exponentials per step, p_t summed),
   compiled here with gcc: the floor.
 * step: cosymp's compiled loop alone (`simulate`, recording only the final state).
-* fused: the fused driver with every figure `cosymp run` gives (max |H + p_t|, max |det M_k - 1|,
-  the symplecticity defect, absolute and relative) and the growth product of every step's map.
+* run: the fused driver with every figure `cosymp run` gives (max |H + p_t|, max |det M_k - 1|,
+  the symplecticity defect, absolute and relative), as run_summary drives it;
+* fused: the same and the growth product of every step's map (what a sweep's point forms).
 * two passes: what `cosymp run` did before the fused driver (every step recorded in chunks of
   2^18, tangent maps formed in a second pass, det and M^T J M - J in NumPy).
 
@@ -94,12 +95,13 @@ def main(argv=None):
     def run_step():
         return simulate(setup, h, n * h, stride=n).z[-1, 0]
 
-    def run_fused():
-        d = Drive(setup, h, growth=True)
+    def run_fused(growth):
+        d = Drive(setup, h, growth=growth)
         d.run(n)
         return d.Z[0]
 
-    cases = {"C": run_c, "step": run_step, "fused": run_fused, "two passes": lambda: two_passes(setup, h, n)}
+    cases = {"C": run_c, "step": run_step, "run": lambda: run_fused(False), "fused": lambda: run_fused(True),
+             "two passes": lambda: two_passes(setup, h, n)}
     finals = {name: fn() for name, fn in cases.items()}  # warm-up (and compilation)
     best = dict.fromkeys(cases, math.inf)
     for _ in range(args.repeats):

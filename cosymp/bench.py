@@ -45,6 +45,7 @@ TARGET = 1.2
 BUDGET_S = 0.3
 MIN_REPEATS = 3
 AGREE = 1e-9
+NO_H = np.empty((0, 1))  # the loops' records of H: none
 STOPPED = {OVERFLOW: "overflow", NEWTON: "Newton did not converge", SINGULAR: "singular Newton matrix"}
 C_PARAMS = {"charged": ("m", "e", "B0", "eps", "w", "C00", "C01", "C11", "d")}
 """Fields of a scene's parameter tuple the C reference reads, in its struct's order (default: all)."""
@@ -140,7 +141,7 @@ class _Numba(_Runner):
 
     def _run(self):
         return self.kernel(self.setup.data, self.setup.P, 0.0, self.h, self.Z, self.PT, self.nsteps, 1,
-                           self.Trec, self.Zrec, self.PTrec, self.dZrec, True)  # scaled, as bench_ref.c
+                           self.Trec, self.Zrec, self.PTrec, self.dZrec, NO_H, True, False)  # scaled, as bench_ref.c
 
 
 class _C(_Runner):

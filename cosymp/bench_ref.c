@@ -8,12 +8,14 @@
 
      -DSCENE=DECAYING|DAMPED|MODULATED|CHARGED|KAPITZA  -DNDOF=n -DNCOEF=k -DLINEAR=0|1
 
-   The sizes numba knows when it compiles (state size, coefficient count) are compile-time
-   constants here too; the family's data (tableau, weights, gammas, offsets, and so the number
-   of stages and offsets) arrive at run time as arrays, as numba receives them. Scene parameters
+   The sizes numba knows when it compiles (state size, coefficient count, the stage count of a
+   Gauss tableau and of an explicit one of at most 4 stages) are compile-time constants here too; the other families' data (tableau, weights,
+   gammas, offsets, and so the number of stages and offsets) arrive at run time as arrays, as
+   numba receives them. Scene parameters
    are held by value, as numba holds its named tuple. The charged scene is the paper's
    beta(t) = B0 (1 + eps sin(w t)). */
 #include <math.h>
+#include <stdlib.h>
 
 #define DECAYING 1
 #define DAMPED 2
@@ -882,6 +884,17 @@ INLINE long coefs(const Params *P, const Family *D, double tk, double tk1, doubl
     return e;
 }
 
+/* loops._add: Neumaier's compensated sum of p_t's increments, (sum, compensation) per member */
+INLINE void add(double *S, double *Cc, long i, double d, double *sum, double *comp)
+{
+    double s = S[i] + d;
+    if (fabs(S[i]) >= fabs(d))
+        *comp = Cc[i] + ((S[i] - s) + d);
+    else
+        *comp = Cc[i] + ((d - s) + S[i]);
+    *sum = s;
+}
+
 /* _accept: check the member's new state, store it, record it */
 INLINE int accept(int status, long i, const double *z, const double *old, double pt, Loop *L,
                          long rec, int recording)
@@ -928,6 +941,11 @@ INLINE int propagate(int family, const Family *D, const Work *W,
                 L.dZrec[i * ld + r] = NAN;
         }
     }
+    double *S = malloc(L.N * sizeof(double)), *Cc = malloc(L.N * sizeof(double));
+    for (long i = 0; i < L.N; i++) {
+        S[i] = L.PT[i];
+        Cc[i] = 0.0;
+    }
     long rec = 1, prev = 0;
     double up = 1.0, down = 1.0;
     for (long k = 0; k < L.nsteps; k++) {
@@ -942,7 +960,7 @@ INLINE int propagate(int family, const Family *D, const Work *W,
 #if LINEAR
         double s = lmatrix(family, D, W, P, C, tk, h, Mm, Q);
 #endif
-        int recording = (k + 1) % L.stride == 0;
+        int recording = (k + 1) % L.stride == 0 || k + 1 == L.nsteps;
         for (long i = 0; i < L.N; i++) {
 #if LINEAR
             double quad = 0.0;
@@ -961,59 +979,95 @@ INLINE int propagate(int family, const Family *D, const Work *W,
                 quad += zs[r] * qr;
             }
             rescale(z, e, up, down);
-            int status = accept(OK, i, z, old, L.PT[i] - (0.5 * quad + s), &L, rec, recording);
+            double sum, comp;
+            add(S, Cc, i, -(0.5 * quad + s), &sum, &comp);
+            int status = accept(OK, i, z, old, sum + comp, &L, rec, recording);
 #else
             for (int r = 0; r < M; r++) {
                 old[r] = L.Z[i * ld + r];
                 z[r] = old[r];
             }
-            double pt = L.PT[i];
+            double dpt = 0.0, sum, comp;
             rescale(z, e, down, up);
-            int status = step(family, D, W, C, h, z, &pt);
+            int status = step(family, D, W, C, h, z, &dpt);
             rescale(z, e, up, down);
-            status = accept(status, i, z, old, pt, &L, rec, recording);
+            add(S, Cc, i, dpt, &sum, &comp);
+            status = accept(status, i, z, old, sum + comp, &L, rec, recording);
 #endif
             if (status != OK) {
+                free(S);
+                free(Cc);
                 Lp->done = k;
                 return status;
             }
+            S[i] = sum;
+            Cc[i] = comp;
         }
         if (recording) {
             L.Trec[rec] = t0 + (k + 1) * h;
             rec += 1;
         }
     }
+    free(S);
+    free(Cc);
     Lp->done = L.nsteps;
     return OK;
 }
 
 /* ---- entry points, one per family: the scene's parameters by value, the family's arrays ---- */
 
-int run_explicit(Loop *L, const double *params, const double *offsets, long u, const double *A,
-                 const double *b, const long *stage, long s)
+INLINE int explicit_run(Loop *L, const double *params, const double *offsets, int u, const double *A,
+                        const double *b, const long *stage, int s)
 {
     Params P = *(const Params *)params;
-    Family D = {.offsets = offsets, .u = (int)u};
+    Family D = {.offsets = offsets, .u = u};
     D.A = A;
     D.b = b;
     D.stage = stage;
-    D.s = (int)s;
+    D.s = s;
     double K[LINEAR ? s * M * M : s * M];
     Work W = {.K = K};
     return propagate(EXPLICIT, &D, &W, &P, L);
 }
 
-int run_gauss(Loop *L, const double *params, const double *offsets, long u, const double *A,
-              const double *b, long s)
+/* numba compiles a tableau of at most 4 stages per (stages, nodes) (methods.FIXED_STAGES: its
+   data are tuples): so is this, for the registered ones (Euler, RK4); longer ones at run time */
+int run_explicit(Loop *L, const double *params, const double *offsets, long u, const double *A,
+                 const double *b, const long *stage, long s)
+{
+    if (s == 1 && u == 1)
+        return explicit_run(L, params, offsets, 1, A, b, stage, 1);
+    if (s == 4 && u == 3)
+        return explicit_run(L, params, offsets, 3, A, b, stage, 4);
+    return explicit_run(L, params, offsets, (int)u, A, b, stage, (int)s);
+}
+
+INLINE int gauss_run(Loop *L, const double *params, const double *offsets, const double *A,
+                     const double *b, int s)
 {
     Params P = *(const Params *)params;
-    Family D = {.offsets = offsets, .u = (int)u};
+    Family D = {.offsets = offsets, .u = s};
     D.A = A;
     D.b = b;
-    D.s = (int)s;
+    D.s = s;
     double K[s * M * M], Zs[s * M], Fs[s * M], F[s * M], Jm[s * M * s * M];
     Work W = {.K = K, .Zs = Zs, .Fs = Fs, .F = F, .Jm = Jm};
     return propagate(GAUSS, &D, &W, &P, L);
+}
+
+/* numba compiles a Gauss tableau per stage count (its data are tuples): so is this, per case */
+int run_gauss(Loop *L, const double *params, const double *offsets, long u, const double *A,
+              const double *b, long s)
+{
+    (void)u; /* the nodes are the offsets: u = s */
+    switch (s) {
+    case 2:
+        return gauss_run(L, params, offsets, A, b, 2);
+    case 3:
+        return gauss_run(L, params, offsets, A, b, 3);
+    default:
+        return gauss_run(L, params, offsets, A, b, (int)s);
+    }
 }
 
 int run_theta(Loop *L, const double *params, const double *offsets, long u, double wq0, double wq1,

@@ -1,20 +1,21 @@
 """Runs: checked input, one compiled loop per run or ensemble, results with p_t and H + p_t."""
+import functools
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from . import warm
 from .errors import InputError, RunError, as_number, quoted
-from .kernels.families import NEWTON, OK, OVERFLOW, SINGULAR
+from .kernels.families import NEWTON, OK, OVERFLOW, SINGULAR, START
 from .kernels.loops import energies, propagate
 from .methods import method as get_method
 from .scenes import SCENES
 
 MAX_STEPS = 100_000_000
 MAX_RECORDED = 20_000_000
-_LOADED = set()  # (kernel, family, scene) whose compiled loop this process has loaded
+_ENTRIES = {}  # (kernel, method, scene parameter class) -> the compiled loop's entry point
 
 
 def get_scene(name):
@@ -77,7 +78,8 @@ class Trajectory:
     H_ext = H + p_t is the extended Hamiltonian (0 at the start by the convention
     p_t(0) = -H(z0, 0)). `steps` were completed with step h; record j is step j*stride, and the
     last record is the last step (also where stride does not divide steps).
-    `wall_s` is the compiled loop's time (its compilation, if any, is not counted).
+    `wall_s` is the compiled call's time: the steps and the records' H (its compilation, if any,
+    is not counted).
     `failure` holds the message of a run that stopped early (overflow, Newton).
     """
 
@@ -92,7 +94,6 @@ class Trajectory:
     wall_s: float
     increments: np.ndarray = None
     failure: str = ""
-    extra: dict = field(default_factory=dict)
 
     @property
     def q(self):
@@ -134,7 +135,9 @@ def default_stride(steps, members, m, increments=False):
     """simulate's default stride: every step while the records (members x (m + 1) values, three
     times that with increments) fit in MAX_RECORDED values, else the smallest stride that fits."""
     per_record = members * (m + 1) * (3 if increments else 1)
-    stride = max(1, math.ceil(steps * per_record / MAX_RECORDED))
+    if (steps + 1) * per_record <= MAX_RECORDED:
+        return 1
+    stride = math.ceil(steps * per_record / MAX_RECORDED)
     while records(steps, stride) * per_record > MAX_RECORDED:
         stride += 1
     return stride
@@ -146,6 +149,10 @@ def records(steps, stride):
     return steps // stride + 1 + (steps % stride != 0)
 
 
+START_FAILED = ("H at the start (t = {t0:g}) is not finite: the scene's coefficients or the initial state "
+                "overflow there; change the parameters (beta(t), B0, ...) or q0, p0")
+
+
 def start_pt(setup, Z, t0, pt0=None):
     """p_t of the members Z at t0: pt0 if given, else -H(z, t0) (so H + p_t starts at 0)."""
     PT = np.empty(Z.shape[0])
@@ -155,10 +162,29 @@ def start_pt(setup, Z, t0, pt0=None):
     H0 = np.empty((1, Z.shape[0]))
     energies(setup.P, np.array([float(t0)]), Z[None], H0)
     if not np.isfinite(H0).all():
-        raise InputError(f"H at the start (t = {t0:g}) is not finite: the scene's coefficients or the "
-                         f"initial state overflow there; change the parameters (beta(t), B0, ...) or q0, p0")
+        raise InputError(START_FAILED.format(t0=t0))
     PT[:] = -H0[0]
     return PT
+
+
+@functools.cache
+def _none(N, m):
+    """An empty (0, N, m) array: the increments of a run that records none."""
+    return np.empty((0, N, m))
+
+
+def _entry(kernel, setup, args):
+    """The compiled loop for these arguments, called without numba's dispatch (which types every
+    argument on every call: 1.5 us, more than a short run's steps). On the first call of a key the
+    loop is loaded or compiled by a zero-step call, untimed; the arguments' types never change
+    for a key (arrays made here, float64 and C-contiguous)."""
+    key = (kernel, setup.method.name, type(setup.P))
+    fn = _ENTRIES.get(key)
+    if fn is None:
+        kernel(*args[:6], 0, *args[7:])
+        compiled = kernel.overloads.get(tuple(kernel.typeof_pyval(a) for a in args))
+        fn = _ENTRIES[key] = kernel if compiled is None else compiled.entry_point
+    return fn
 
 
 def simulate(setup, h, T, z0=None, stride=None, increments=False, t0=0.0, pt0=None):
@@ -181,29 +207,31 @@ def simulate(setup, h, T, z0=None, stride=None, increments=False, t0=0.0, pt0=No
     if K * per_record > MAX_RECORDED:
         raise InputError(f"recording {K} states of {N} trajectories exceeds the memory cap "
                          f"({MAX_RECORDED:.0e} values): pass a larger stride")
-    PT = start_pt(setup, Z, t0, pt0)
-    Trec = np.empty(K)
-    Zrec = np.empty((K, N, m))
-    PTrec = np.empty((K, N))
-    dZrec = np.empty((K if increments else 0, N, m))
+    PT = np.empty(N)
+    if pt0 is not None:
+        PT[:] = pt0
+    Trec, PTrec, H, Zrec = np.empty(K), np.empty((K, N)), np.empty((K, N)), np.empty((K, N, m))
+    dZrec = np.empty((K, N, m)) if increments else _none(N, m)
     kernel = propagate(setup, N)
-    key = (kernel, type(setup.data), type(setup.P))
+    t0, h = float(t0), float(h)
     scaled = setup.scene.needs_scaling(setup.P, max(abs(t0), abs(t0 + steps * h)))
-    if key not in _LOADED:  # load or compile it untimed (the arrays' types never change)
-        kernel(setup.data, setup.P, float(t0), float(h), Z, PT, 0, stride, Trec, Zrec, PTrec, dZrec, scaled)
-        _LOADED.add(key)
+    args = (setup.data, setup.P, t0, h, Z, PT, steps, int(stride), Trec, Zrec, PTrec, dZrec, H, scaled,
+            pt0 is None)
+    loop = _entry(kernel, setup, args)
     start = time.perf_counter()
-    status, done = kernel(setup.data, setup.P, float(t0), float(h), Z, PT, steps, stride, Trec, Zrec, PTrec, dZrec,
-                          scaled)
+    status, done = loop(*args)
     wall = time.perf_counter() - start
-    kept = records(done, stride) if status == OK else done // stride + 1
-    traj = _trajectory(setup, h, stride, Trec[:kept], Zrec[:kept], PTrec[:kept],
-                       dZrec[:kept] if increments else None, done, wall)
-    if status != OK:
-        t_fail = t0 + done * h
-        traj.failure = failure_message(status, round(t0 / h) + done, t_fail, h, _exact_overflows(setup, t_fail))
-        raise RunError(traj.failure, t_fail, done, traj)
-    return traj
+    if status == START:
+        raise InputError(START_FAILED.format(t0=t0))
+    if status == OK:
+        traj = Trajectory(setup, h, stride, Trec, Zrec, PTrec, H, done, wall, dZrec if increments else None)
+        return traj
+    kept = done // stride + 1
+    traj = Trajectory(setup, h, stride, Trec[:kept], Zrec[:kept], PTrec[:kept], H[:kept], done, wall,
+                      dZrec[:kept] if increments else None)
+    t_fail = t0 + done * h
+    traj.failure = failure_message(status, round(t0 / h) + done, t_fail, h, _exact_overflows(setup, t_fail))
+    raise RunError(traj.failure, t_fail, done, traj)
 
 
 def _exact_overflows(setup, t):
@@ -215,12 +243,6 @@ def _exact_overflows(setup, t):
     except RunError:
         return True
     return not np.all(np.abs(z) < 1e300)
-
-
-def _trajectory(setup, h, stride, T, Z, PT, dZ, steps, wall):
-    H = np.empty(PT.shape)
-    energies(setup.P, T, Z, H)
-    return Trajectory(setup, h, stride, T, Z, PT, H, steps, wall, dZ)
 
 
 def failure_message(status, step, t, h, exact_overflows=False):

@@ -18,8 +18,23 @@ def _floats(x):
     return np.ascontiguousarray(np.ravel(x), dtype=float)
 
 
+def _fixed(x, kind=float):
+    """Numbers as a tuple, whose length is part of its numba type: a loop compiled for it knows the
+    count at compile time and unrolls it (the Gauss methods' stages, and so the size of their
+    Newton solve: 1.5-1.8x faster steps; Euler's and RK4's: 1.1-1.35x. Measured with cosymp
+    bench and benchmarks/plain.py)."""
+    return tuple(kind(v) for v in np.ravel(x))
+
+
+FIXED_STAGES = 4
+"""Explicit tableaus of at most this many stages are tuples. RK8's 12 stages stay arrays: unrolled,
+its 66 stage couplings cost more than they save (modulated 175 -> 275 ns a step)."""
+
+
 def _explicit(A, b, c):
     offsets, stage = np.unique(np.asarray(c, float), return_inverse=True)
+    if len(b) <= FIXED_STAGES:
+        return Explicit(_fixed(A), _fixed(b), _fixed(stage, int), _fixed(offsets))
     return Explicit(_floats(A), _floats(b), stage.astype(np.int64), offsets)
 
 
@@ -101,7 +116,7 @@ def _rk8():
 def _gauss4():
     r = math.sqrt(3.0) / 6.0
     A = np.array([[0.25, 0.25 - r], [0.25 + r, 0.25]])
-    return Gauss(_floats(A), _floats([0.5, 0.5]), _floats([0.5 - r, 0.5 + r]))
+    return Gauss(_fixed(A), _fixed([0.5, 0.5]), _fixed([0.5 - r, 0.5 + r]))
 
 
 def _gauss6():
@@ -109,7 +124,7 @@ def _gauss6():
     A = np.array([[5 / 36, 2 / 9 - r / 15, 5 / 36 - r / 30],
                   [5 / 36 + r / 24, 2 / 9, 5 / 36 - r / 24],
                   [5 / 36 + r / 30, 2 / 9 + r / 15, 5 / 36]])
-    return Gauss(_floats(A), _floats([5 / 18, 4 / 9, 5 / 18]), _floats([0.5 - r / 10, 0.5, 0.5 + r / 10]))
+    return Gauss(_fixed(A), _fixed([5 / 18, 4 / 9, 5 / 18]), _fixed([0.5 - r / 10, 0.5, 0.5 + r / 10]))
 
 
 def _theta(value):

@@ -1,9 +1,9 @@
 """Compiling the kernels ahead of use: in one process per core, in units, with progress.
 
-numba compiles each generic loop once per (scene, method family) and keeps it in its disk cache
-(kernels.cachestamp). A *unit* is everything one (scene, family) pair needs: its loops for one
-trajectory and for ensembles, its tangent maps, the scene's energies and vector field, the map
-product. The `common` unit holds what building a setup compiles (the charged scene's beta(t),
+numba compiles each generic loop once per (scene, method family), tableaus that are tuples (Gauss,
+Euler, RK4: methods._fixed) once per length, and keeps it in its disk cache (kernels.cachestamp).
+A *unit* is everything one (scene, family) pair needs: its loops for one trajectory and for
+ensembles, its tangent maps, the scene's energies and vector field, the map product. The `common` unit holds what building a setup compiles (the charged scene's beta(t),
 which its initial state needs). A compiled unit leaves a marker beside the cache, and so does a
 complete cache, so a warm cache is recognised without loading or importing anything more.
 
@@ -53,7 +53,14 @@ class Unit:
             for scene in SCENES.values():
                 Setup.make(scene, next(iter(_families(scene).values()))[0])
             return
-        _exercise(Setup.make(self.scene, self.methods[0]))
+        from numba import typeof
+
+        compiled = set()
+        for name in self.methods:  # each data type of the family (tuples: one per length)
+            setup = Setup.make(self.scene, name)
+            if typeof(setup.data) not in compiled:
+                compiled.add(typeof(setup.data))
+                _exercise(setup)
 
 
 def _families(scene):

@@ -452,7 +452,9 @@ def test_long_run_in_chunks_matches_the_one_shot_run_and_can_be_cancelled():
     for e in one_shot.entries:
         d = data[e.label]
         H = e.comparison.run.H_ext[1:, 0]
-        assert d["H_max"].max() == pytest.approx(H.max(), rel=1e-6, abs=1e-12)
+        # the long run takes member steps, the comparison's ensemble steps by the step matrix:
+        # p_t differs by round-off accumulated over the 2e4 steps (about 1e-12)
+        assert d["H_max"].max() == pytest.approx(H.max(), rel=1e-6, abs=1e-11)
         assert d["det"].max() == pytest.approx(e.comparison.det_dev.max(), rel=1e-6, abs=1e-15)
     lr2 = longrun.LongRun(s, T_long=5e6)  # 5e7 steps: seconds, so that a progress report (each 0.25 s) comes first
     lr2.param.watch(lambda e: lr2.cancel(), "progress")

@@ -16,7 +16,7 @@ from cosymp.diagnostics import (
 )
 from cosymp.drive import Drive
 from cosymp.integrate import Setup, simulate
-from cosymp.kernels.survey import _least, _most
+from cosymp.kernels.survey import _least, _most, defects, symplecticity
 from cosymp.methods import METHODS
 from cosymp.scenes import SCENES
 from cosymp.summary import long_drive, long_envelopes, run_summary
@@ -57,10 +57,22 @@ def test_fused_driver_matches_numpy_diagnostics(scene, method):
     n = s.scene.ndof
     prod = np.eye(2 * n)
     for t, Mk in zip(tr.t, M):
-        e = s.scene.kernel.scaling(s.P, t)[0]
+        e = s.scene.kernel.scaling(s.P, t)
         S = np.diag([2.0 ** -e] * n + [2.0 ** e] * n)
         prod = np.linalg.solve(S, Mk @ S) @ prod
     assert d.growth.log_norm() == pytest.approx(math.log(np.linalg.norm(prod, 2)), abs=1e-10)
+
+
+@pytest.mark.parametrize("scene,method", PAIRS)
+def test_fused_run_takes_the_steps_of_simulate(scene, method):
+    """Member steps on every scene, so the states and p_t are simulate's bit for bit (on a linear
+    scene the fused loop stepped by the step matrix, whose p_t quadratic form loses accuracy)."""
+    s = Setup.make(scene, method)
+    h = s.scene.h
+    tr = simulate(s, h, STEPS * h, stride=STEPS)
+    d = Drive(s, h, width=WIDTH, growth=True)
+    d.run(STEPS)
+    assert np.array_equal(d.Z, tr.z[-1]) and np.array_equal(d.PT, tr.pt[-1])
 
 
 @pytest.mark.parametrize("scene,method", [p for p in PAIRS if p[1] in ("midpoint", "rk4", "gauss4", "leapfrog", "boris")])
@@ -152,6 +164,23 @@ def test_a_nan_is_kept_by_the_reductions():
     assert math.isnan(_most(1.0, nan)) and math.isnan(_most(nan, 1.0))
     assert math.isnan(_least(1.0, nan)) and math.isnan(_least(nan, 1.0))
     assert _most(1.0, 2.0) == 2.0 and _least(1.0, 2.0) == 1.0
+
+
+def test_the_map_defects_of_one_degree_of_freedom_are_the_general_ones():
+    """For 2 x 2 maps `defects` forms |det M - 1| and the symplecticity defect from one pair of
+    products (M^T J M = det(M) J): the general formula's defects bit for bit, det to round-off;
+    a scaling by c has det c^2 and M^T J M = c^2 J; a NaN stays NaN in every figure."""
+    rng = np.random.default_rng(16)
+    B = np.empty((2, 2))
+    for M in [rng.normal(size=(2, 2)) for _ in range(50)] + [np.array([[0.6, -0.8], [0.8, 0.6]]), 3.0 * np.eye(2)]:
+        dev, symp, rel = defects(M, B, 2)
+        assert (symp, rel) == symplecticity(M, 2)
+        assert close(dev, abs(np.linalg.det(M) - 1.0), 1e-12, 4e-16 * (1.0 + np.abs(M).max() ** 2))
+    assert defects(3.0 * np.eye(2), B, 2) == (8.0, 8.0, 8.0 / 9.0)
+    for m in (2, 4):
+        M = np.eye(m)
+        M[0, 1] = math.nan
+        assert all(math.isnan(v) for v in defects(M, np.empty((m, m)), m))
 
 
 def test_a_bin_without_a_sampled_map_says_so():

@@ -104,7 +104,7 @@ def test_matrix_path_agrees_with_member_path(case):
     Z = initial_states(s).copy()
     PT = -run.H[:1, 0].copy()
     rec = (np.empty(K + 1), np.empty((K + 1, 1, Z.shape[1])), np.empty((K + 1, 1)), np.empty((0, 1, Z.shape[1])))
-    status, done = propagate_matrix(s.data, s.P, 0.0, h, Z, PT, K, 1, *rec, True)
+    status, done = propagate_matrix(s.data, s.P, 0.0, h, Z, PT, K, 1, *rec, np.empty((0, 1)), True, False)
     assert status == 0 and done == K
     scale = np.max(np.abs(run.z[:, 0]))
     assert np.max(np.abs(rec[1][:, 0] - run.z[:, 0])) < 1e-12 * scale * K

@@ -21,14 +21,14 @@ def cases():
 
 def explicit(m, D, theta):
     s = len(D.b)
-    A = D.A.reshape(s, s)
-    c = D.offsets[D.stage]
+    A = np.reshape(D.A, (s, s))
+    b, c = np.array(D.b), np.array(D.offsets)[np.array(D.stage)]
     assert np.all(np.triu(A) == 0.0), "an explicit tableau is strictly lower triangular"
     assert np.allclose(A.sum(axis=1), c, rtol=0, atol=TOL), "row sums of A are the nodes c"
     for k in range(1, m.order + 1):  # the bushy-tree conditions up to the declared order
-        assert np.dot(D.b, c ** (k - 1)) == pytest.approx(1.0 / k, abs=TOL), f"sum b c^{k - 1} = 1/{k}"
-    trees = {3: [(D.b @ (A @ c), 1 / 6)],
-             4: [(D.b @ (c * (A @ c)), 1 / 8), (D.b @ (A @ c ** 2), 1 / 12), (D.b @ (A @ (A @ c)), 1 / 24)]}
+        assert np.dot(b, c ** (k - 1)) == pytest.approx(1.0 / k, abs=TOL), f"sum b c^{k - 1} = 1/{k}"
+    trees = {3: [(b @ (A @ c), 1 / 6)],
+             4: [(b @ (c * (A @ c)), 1 / 8), (b @ (A @ c ** 2), 1 / 12), (b @ (A @ (A @ c)), 1 / 24)]}
     for order, conditions in trees.items():
         if m.order >= order:
             for value, expected in conditions:
@@ -37,16 +37,16 @@ def explicit(m, D, theta):
 
 def gauss(m, D, theta):
     s = len(D.b)
-    A = D.A.reshape(s, s)
-    c = D.offsets
+    A = np.reshape(D.A, (s, s))
+    b, c = np.array(D.b), np.array(D.offsets)
     assert np.allclose(A.sum(axis=1), c, rtol=0, atol=TOL), "row sums of A are the nodes c"
     assert np.allclose(np.polynomial.legendre.legroots([0] * s + [1]), 2 * c - 1, atol=TOL), \
         "the nodes are the Gauss-Legendre points"
     for k in range(1, 2 * s + 1):
-        assert np.dot(D.b, c ** (k - 1)) == pytest.approx(1.0 / k, abs=TOL), f"B({2 * s}): sum b c^{k - 1} = 1/{k}"
+        assert np.dot(b, c ** (k - 1)) == pytest.approx(1.0 / k, abs=TOL), f"B({2 * s}): sum b c^{k - 1} = 1/{k}"
     for k in range(1, s + 1):
         assert np.allclose(A @ c ** (k - 1), c ** k / k, rtol=0, atol=TOL), f"C({s}): collocation at degree {k}"
-    sym = D.b[:, None] * A + (D.b[:, None] * A).T - np.outer(D.b, D.b)
+    sym = b[:, None] * A + (b[:, None] * A).T - np.outer(b, b)
     assert np.max(np.abs(sym)) < TOL, "symplectic: b_i a_ij + b_j a_ji = b_i b_j"
     assert 2 * s == m.order
 

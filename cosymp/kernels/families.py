@@ -3,8 +3,10 @@
 A step advances one trajectory of the extended state (q, t, p, p_t) by h, given the scene's
 time coefficients at the family's time offsets (row j of C at t + offsets[j] h, shared by every
 member of an ensemble). z = (q, p) is updated in place; the new p_t is returned with a status.
-Family data are arrays: every tableau of a family runs one compiled loop, its stack scratch sized
-by kernels.stack's bounds. Linear scenes use the same families as matrices (kernels.linear).
+Family data are arrays, so that every tableau of a family runs one compiled loop, its stack
+scratch sized by kernels.stack's bounds; the Gauss tableaus and the explicit ones of at most
+methods.FIXED_STAGES stages are tuples instead, so that their stage count (and the size of the
+Gauss Newton solve) is known at compile time: one loop per stage count, see methods._fixed. Linear scenes use the same families as matrices (kernels.linear).
 """
 from collections import namedtuple
 
@@ -13,7 +15,7 @@ from numba import njit
 
 from .dispatch import (
     INLINE,
-    SCRATCH,
+    IR_INLINE,
     bfield,
     dhdt,
     drift,
@@ -31,6 +33,7 @@ from .linalg import solve
 from .stack import matrices, stage_flat, stage_square, stage_vectors, vectors
 
 OK, OVERFLOW, NEWTON, SINGULAR = 0, 1, 2, 3
+START = -1  # H is not finite at the start: no step taken
 NEWTON_MAX = 50
 NEWTON_TOL = 4e-15
 
@@ -41,7 +44,7 @@ Theta = namedtuple("Theta", "wq0 wq1 wp0 wp1 offsets")
 Theta.__doc__ = ("Theta step: H evaluated at q = wq0 q_k + wq1 q_k+1, p = wp0 p_k + wp1 p_k+1, "
                  "t = t_k + offsets[0] h.")
 Gauss = namedtuple("Gauss", "A b offsets")
-Gauss.__doc__ = "Implicit (collocation) Runge-Kutta tableau (A flattened), nodes = offsets."
+Gauss.__doc__ = "Implicit (collocation) Runge-Kutta tableau (A flattened), nodes = offsets; tuples."
 Composition = namedtuple("Composition", "gammas offsets")
 Composition.__doc__ = "Midpoint sub-steps of sizes gammas[i] h, sub-step i centred at offsets[i]."
 Boris = namedtuple("Boris", "offsets")
@@ -54,7 +57,7 @@ Splitting.__doc__ = ("Explicit splitting of a separable H = T(p, t) + V(q, t), t
                      "then the drift a[i] h (the exact flow of T + p_t).")
 
 
-@njit(**INLINE)
+@njit(**IR_INLINE)
 def _newton_done(dz, ndz, z, nz, prev):
     """Converged to round-off: a small correction, or one that stopped shrinking near the floor."""
     size = 1.0
@@ -111,7 +114,7 @@ def theta_core(P, C, j, h, wq0, wq1, wp0, wp1, z, pt, V, Hm, Jm):
     return status, pt
 
 
-@njit(**SCRATCH)
+@njit(**IR_INLINE)
 def theta_work(D, P, z):
     return vectors(P, 4, z), matrices(P, 2, z)
 
@@ -133,7 +136,7 @@ def composition_step(D, P, C, t, h, z, pt, W):
     return status, pt
 
 
-@njit(**SCRATCH)
+@njit(**IR_INLINE)
 def explicit_work(D, P, z):
     return stage_vectors(D, P, z), vectors(P, 2, z)
 
@@ -166,7 +169,7 @@ def explicit_step(D, P, C, t, h, z, pt, W):
     return OK, pt - h * dpt
 
 
-@njit(**SCRATCH)
+@njit(**IR_INLINE)
 def gauss_work(D, P, z):
     return (stage_vectors(D, P, z), stage_vectors(D, P, z), vectors(P, 2, z), stage_flat(D, P, z),
             matrices(P, 1, z)[0], stage_square(D, P, z))
@@ -236,7 +239,7 @@ def gauss_step(D, P, C, t, h, z, pt, W):
     return status, pt
 
 
-@njit(**SCRATCH)
+@njit(**IR_INLINE)
 def boris_work(D, P, z):
     return vectors(P, 5, z)
 
@@ -282,7 +285,7 @@ def boris_step(D, P, C, t, h, z, pt, W):
     return boris_core(P, C, h, z, pt, W)
 
 
-@njit(**SCRATCH)
+@njit(**IR_INLINE)
 def exact_work(D, P, z):
     return vectors(P, 1, z)
 
@@ -295,7 +298,7 @@ def exact_step(D, P, C, t, h, z, pt, W):
     return OK, pt + H0 - energy(P, C, 1, z)
 
 
-@njit(**SCRATCH)
+@njit(**IR_INLINE)
 def splitting_work(D, P, z):
     return vectors(P, 1, z)
 

@@ -2,10 +2,10 @@
 from numba import njit
 from numba.extending import overload
 
-from .dispatch import _INLINE, INLINE
+from .dispatch import _IR_INLINE, IR_INLINE
 
 
-@njit(**INLINE)
+@njit(**IR_INLINE)
 def solve(A, B, n, k):
     """Overwrite the leading n x k block of B with A^-1 B (partial pivoting); A is destroyed.
 
@@ -51,7 +51,7 @@ def _scale_row(B, c, f, k):
     """Row c of B *= f."""
 
 
-@overload(_swap_rows, jit_options=_INLINE)
+@overload(_swap_rows, jit_options=_IR_INLINE, inline="always")
 def _swap_rows_impl(B, a, b, k):
     if B.ndim == 1:
         def swap(B, a, b, k):
@@ -63,7 +63,7 @@ def _swap_rows_impl(B, a, b, k):
     return swap
 
 
-@overload(_axpy_rows, jit_options=_INLINE)
+@overload(_axpy_rows, jit_options=_IR_INLINE, inline="always")
 def _axpy_rows_impl(B, i, c, f, k):
     if B.ndim == 1:
         def axpy(B, i, c, f, k):
@@ -75,7 +75,7 @@ def _axpy_rows_impl(B, i, c, f, k):
     return axpy
 
 
-@overload(_scale_row, jit_options=_INLINE)
+@overload(_scale_row, jit_options=_IR_INLINE, inline="always")
 def _scale_row_impl(B, c, f, k):
     if B.ndim == 1:
         def scale(B, c, f, k):

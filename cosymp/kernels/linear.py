@@ -7,7 +7,7 @@ scenes.quadratic) and applied to every member of an ensemble. M is also the exac
 """
 from numba import njit
 
-from .dispatch import INLINE, SCRATCH, flow, ndof
+from .dispatch import INLINE, IR_INLINE, flow, ndof
 from .families import boris_core, splitting_step
 from .linalg import solve
 from .stack import matrices, stage_matrices, stage_square, vectors
@@ -32,14 +32,14 @@ def sdot0(C, j, m):
     return C[j, 2 * m * m + 1]
 
 
-@njit(**INLINE)
+@njit(**IR_INLINE)
 def identity(A, m):
     for i in range(m):
         for c in range(m):
             A[i, c] = 1.0 if i == c else 0.0
 
 
-@njit(**INLINE)
+@njit(**IR_INLINE)
 def product(A, B, out, m, transpose_a=False, scale=1.0, add=False):
     """out (+)= scale * A B, or scale * A^T B, for m x m matrices."""
     for i in range(m):
@@ -50,7 +50,7 @@ def product(A, B, out, m, transpose_a=False, scale=1.0, add=False):
             out[i, c] = out[i, c] + scale * acc if add else scale * acc
 
 
-@njit(**INLINE)
+@njit(**IR_INLINE)
 def add_sandwich(Q, G, C, j, m, scale, T):
     """Q += scale * G^T (dS/dt)_j G, with T an m x m scratch."""
     for i in range(m):
@@ -85,7 +85,7 @@ def theta_matrix(P, C, j, h, wq0, wq1, wp0, wp1, M, Q, A, N):
     return h * sdot0(C, j, m)
 
 
-@njit(**INLINE)
+@njit(**IR_INLINE)
 def compose(M, Q, s, M1, Q1, s1, m, T):
     """(M, Q, s) <- (M1, Q1, s1) after (M, Q, s)."""
     product(Q1, M, T, m)
@@ -97,7 +97,7 @@ def compose(M, Q, s, M1, Q1, s1, m, T):
     return s + s1
 
 
-@njit(**SCRATCH)
+@njit(**IR_INLINE)
 def theta_lwork(D, P):
     return matrices(P, 2, 0.0)
 
@@ -107,7 +107,7 @@ def theta_lmatrix(D, P, C, t, h, M, Q, W):
     return theta_matrix(P, C, 0, h, D.wq0, D.wq1, D.wp0, D.wp1, M, Q, W[0], W[1])
 
 
-@njit(**SCRATCH)
+@njit(**IR_INLINE)
 def composition_lwork(D, P):
     return matrices(P, 5, 0.0)
 
@@ -126,7 +126,7 @@ def composition_lmatrix(D, P, C, t, h, M, Q, W):
     return s
 
 
-@njit(**SCRATCH)
+@njit(**IR_INLINE)
 def gauss_lwork(D, P):
     return matrices(P, 1, 0.0), stage_square(D, P, 0.0), stage_matrices(D, P, 0.0)
 
@@ -167,7 +167,7 @@ def gauss_lmatrix(D, P, C, t, h, M, Q, W):
     return total
 
 
-@njit(**SCRATCH)
+@njit(**IR_INLINE)
 def explicit_lwork(D, P):
     return matrices(P, 2, 0.0), stage_matrices(D, P, 0.0)
 
@@ -209,7 +209,7 @@ def explicit_lmatrix(D, P, C, t, h, M, Q, W):
     return total
 
 
-@njit(**SCRATCH)
+@njit(**IR_INLINE)
 def exact_lwork(D, P):
     return matrices(P, 1, 0.0), vectors(P, 1, 0.0)
 
@@ -239,7 +239,7 @@ def exact_lmatrix(D, P, C, t, h, M, Q, W):
     return C[1, 2 * m * m] - C[0, 2 * m * m]
 
 
-@njit(**SCRATCH)
+@njit(**IR_INLINE)
 def boris_lwork(D, P):
     return matrices(P, 2, 0.0), vectors(P, 6, 0.0)
 
@@ -266,7 +266,7 @@ def boris_lmatrix(D, P, C, t, h, M, Q, W):
     return h * sdot0(C, 1, m)
 
 
-@njit(**SCRATCH)
+@njit(**IR_INLINE)
 def splitting_lwork(D, P):
     return vectors(P, 1, 0.0)
 

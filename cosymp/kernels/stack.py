@@ -13,7 +13,7 @@ from numba.core.errors import TypingError
 from numba.extending import intrinsic, overload
 from numba.np.arrayobj import make_array, populate_array
 
-from .dispatch import _SCRATCH
+from .dispatch import _IR_INLINE
 
 
 @intrinsic(prefer_literal=True)
@@ -52,9 +52,16 @@ MAX_STAGES = 16
 MAX_OFFSETS = 16
 
 
+def _count(D, field, bound):
+    """The length of D's field where its type fixes it (a tuple), else the bound: array data let
+    every tableau of a family share one compiled loop."""
+    ty = D.types[D.fields.index(field)]
+    return ty.count if isinstance(ty, types.BaseTuple) else bound
+
+
 def _stages(D):
-    """Stage scratch is sized by a bound, so every tableau of a family shares one compiled loop."""
-    return MAX_STAGES
+    """The number of stages of the tableau D, or its bound MAX_STAGES."""
+    return _count(D, "b", MAX_STAGES)
 
 
 def vectors(P, k, like):
@@ -85,47 +92,48 @@ def coef_table(D, P):
     """The stack table of time coefficients: one row per time offset of D (at most MAX_OFFSETS)."""
 
 
-@overload(vectors, jit_options=_SCRATCH, inline="always", prefer_literal=True)
+@overload(vectors, jit_options=_IR_INLINE, inline="always", prefer_literal=True)
 def _vectors(P, k, like):
     m = 2 * _scene(P).ndof
     kk = k.literal_value
     return lambda P, k, like: stack_array((kk, m), like)
 
 
-@overload(matrices, jit_options=_SCRATCH, inline="always", prefer_literal=True)
+@overload(matrices, jit_options=_IR_INLINE, inline="always", prefer_literal=True)
 def _matrices(P, k, like):
     m = 2 * _scene(P).ndof
     kk = k.literal_value
     return lambda P, k, like: stack_array((kk, m, m), like)
 
 
-@overload(stage_vectors, jit_options=_SCRATCH, inline="always")
+@overload(stage_vectors, jit_options=_IR_INLINE, inline="always")
 def _stage_vectors(D, P, like):
     m = 2 * _scene(P).ndof
     s = _stages(D)
     return lambda D, P, like: stack_array((s, m), like)
 
 
-@overload(stage_flat, jit_options=_SCRATCH, inline="always")
+@overload(stage_flat, jit_options=_IR_INLINE, inline="always")
 def _stage_flat(D, P, like):
     sm = 2 * _scene(P).ndof * _stages(D)
     return lambda D, P, like: stack_array((sm,), like)
 
 
-@overload(stage_matrices, jit_options=_SCRATCH, inline="always")
+@overload(stage_matrices, jit_options=_IR_INLINE, inline="always")
 def _stage_matrices(D, P, like):
     m = 2 * _scene(P).ndof
     s = _stages(D)
     return lambda D, P, like: stack_array((s, m, m), like)
 
 
-@overload(stage_square, jit_options=_SCRATCH, inline="always")
+@overload(stage_square, jit_options=_IR_INLINE, inline="always")
 def _stage_square(D, P, like):
     sm = 2 * _scene(P).ndof * _stages(D)
     return lambda D, P, like: stack_array((sm, sm), like)
 
 
-@overload(coef_table, jit_options=_SCRATCH, inline="always")
+@overload(coef_table, jit_options=_IR_INLINE, inline="always")
 def _coef_table(D, P):
     nc = _scene(P).ncoef
-    return lambda D, P: stack_array((MAX_OFFSETS, nc), 0.0)
+    rows = _count(D, "offsets", MAX_OFFSETS)
+    return lambda D, P: stack_array((rows, nc), 0.0)

@@ -1,25 +1,30 @@
-"""The fused driver's compiled loops: step, form each step's tangent map, reduce the diagnostics.
+"""The fused driver's compiled loop: step, form each step's tangent map, reduce the diagnostics.
 
-One pass per call, nothing stored per step: member 0's one-step tangent map M_k (the step
-matrix on a linear scene, a complex step of the member step otherwise, in the step's scaled
-coordinates as kernels.loops.tangent_matrix and tangent_complex give it) feeds the running
-maxima of |det M_k - 1| and of the symplecticity defect, and the growth product; H + p_t of
-member 0 feeds its running maximum; with 2n + 2 members, members 1..2n+1 give the paper's
-volume estimator det[X^1 ... X^(2n+1)] of their increments; and each of these is also reduced
-to per-bin minima and maxima over bins of `width` steps. No state is recorded: the members'
-states Z and p_t PT are advanced in place.
+One pass per call, nothing stored per step. The members take member steps, as
+kernels.loops.propagate_members does, so a fused run's states are those of `simulate`, on a
+linear scene too (stepping by the step matrix instead gave p_t through its quadratic form
+z.Q z/2, whose round-off grows with the spread of Q's entries: the splittings' Q, read off by
+polarization, made |H + p_t| of blanes-moan6 on damped grow to 5e-3 by gamma t = 40 with
+unscaled steps, and 1000x the member steps' round-off with scaled ones). Member 0's one-step
+tangent map M_k (the step matrix on a linear scene, a complex step of the member step
+otherwise, in the step's scaled coordinates as kernels.loops.tangent_matrix and tangent_complex
+give it) feeds the running maxima of |det M_k - 1| and of the symplecticity defect, and the
+growth product; H + p_t of member 0 feeds its running maximum; with 2n + 2 members, members
+1..2n+1 give the paper's volume estimator det[X^1 ... X^(2n+1)] of their increments; and each of
+these is also reduced to per-bin minima and maxima over bins of `width` steps. No state is
+recorded: the members' states Z and p_t PT are advanced in place.
 
-Arguments shared by both loops: D, P, t0, h, Z, PT, nsteps as kernels.loops.propagate_members
+Arguments of the loop (_fused): D, P, t0, h, Z, PT, nsteps as kernels.loops.propagate_members
 takes them; first: the steps are numbered from `first`, at times t0 + (first + k) h, and S, Cc:
 p_t's compensated sum and its compensation, carried from call to call, so that a run cut into
-calls takes the same steps as one call; every: form member 0's tangent map at the steps k with k % every == 0 (0:
-never); want: which figures to reduce (WANT_H: H + p_t; WANT_MAPS: det and symplecticity of the
-maps), the growth product being kept wherever G is given; scaled: whether the run's range needs
-the scene's scaled steps (scenes.base.Scene.needs_scaling);
+calls takes the same steps as one call; every: form member 0's tangent map at the steps k with
+k % every == 0 (0: never); want: which figures to reduce (WANT_H: H + p_t; WANT_MAPS: det and
+symplecticity of the maps), the growth product being kept wherever G is given; scaled: whether
+the run's range needs the scene's scaled steps (scenes.base.Scene.needs_scaling);
 acc: running maxima (ACC_*), updated in place; env: (bins, len(ENV)) per-bin reductions of this
 call (bin b holds steps b*width .. (b+1)*width - 1; rows preset by the caller), tb (bins,) the
 time after each bin's first step; G: the growth product (m x m, or 0 x 0 for none) and gstate
-its (log scale, exponent, 1.0 while finite) as in diagnostics.MapGrowth. Each returns
+its (log scale, exponent, 1.0 while finite) as in diagnostics.MapGrowth. It returns
 (status, k, in_tangent): k steps completed, and whether a failure came from the tangent map's
 complex step.
 """
@@ -32,16 +37,28 @@ from numba.extending import overload
 from numba.np.unsafe.ndarray import to_fixed_tuple
 
 from .borrow import borrow
-from .dispatch import _INLINE, INLINE, JIT, coef, energy, lmatrix, lwork, ncoef, ndof, scaling, step, work
-from .families import OK
-from .loops import COMPLEX_STEP, _accept, _add, _coefs, _factors, _rescale, apply_matrix
+from .dispatch import (
+    _INLINE,
+    _IR_INLINE,
+    INLINE,
+    IR_INLINE,
+    JIT,
+    coef,
+    energy,
+    lmatrix,
+    lwork,
+    ndof,
+    step,
+    work,
+)
+from .families import OK, START
+from .loops import COMPLEX_STEP, _accept, _add, _coefs, _rescale, _scale, coef_at, energy_at
 from .stack import _scene, coef_table, matrices, vectors
 
 ACC = ("H_ext_max_abs", "det_max_dev", "symp_max_dev", "symp_max_rel")
 WANT_H, WANT_MAPS = 1, 2
 RANGE = 64
 LN2 = math.log(2.0)
-START = -1
 ENV = ("H_min", "H_max", "vol_min", "vol_max", "det", "symp")
 
 
@@ -57,7 +74,7 @@ def _least(a, b):
     return b if b < a or math.isnan(b) else a
 
 
-@njit(**INLINE)
+@njit(**IR_INLINE)
 def determinant(A, m):
     """det of A[:m, :m] by LU with partial pivoting (A is overwritten)."""
     d = 1.0
@@ -83,14 +100,32 @@ def determinant(A, m):
     return d
 
 
+@njit(**IR_INLINE)
+def _copy(A, B, m):
+    """B <- A (m x m)."""
+    for i in range(m):
+        for j in range(m):
+            B[i, j] = A[i, j]
+
+
 @njit(**INLINE)
+def _relative(worst, size):
+    """worst / size, inf where size is 0 (M = 0), NaN where worst is."""
+    if math.isnan(worst):
+        return math.nan
+    return worst / size if size > 0.0 else math.inf
+
+
+@njit(**IR_INLINE)
 def symplecticity(M, m):
     """(||M^T J M - J||_max, the same divided by the largest sum of |terms| that make up an entry
     of M^T J M): the absolute defect and a scale-free one (round-off level for a symplectic map
-    whatever the size of M, the method's own defect otherwise)."""
+    whatever the size of M, the method's own defect otherwise). The maxima are plain ones, a NaN
+    being caught by one flag (a NaN-keeping max per entry cost 2 ns of a damped midpoint step)."""
     n = m // 2
     worst = 0.0
     size = 0.0
+    nan = False
     for i in range(m):
         for j in range(m):
             v = 0.0
@@ -101,25 +136,45 @@ def symplecticity(M, m):
                 v += a - b
                 s += abs(a) + abs(b)
             target = 1.0 if j == i + n else (-1.0 if i == j + n else 0.0)
-            worst = _most(worst, abs(v - target))
-            size = _most(size, s)
-    return worst, worst / size if size > 0.0 else math.inf
+            d = abs(v - target)
+            nan |= math.isnan(d)
+            worst = max(worst, d)
+            size = max(size, s)
+    if nan:
+        worst = math.nan
+    return worst, _relative(worst, size)
 
 
-@njit(**INLINE)
-def grow(M, e, A, B, state, m):
+@njit(**IR_INLINE)
+def defects(M, B, m):
+    """(|det M - 1|, symplecticity(M)) of a one-step map M (B: scratch). With one degree of
+    freedom M^T J M = det(M) J, so the defect is |det M - 1|: both from the two products that
+    symplecticity forms (its figures bit for bit; det to round-off of the LU's), which halves the
+    maps' cost of a damped midpoint step (run_summary's figures 39 -> 35 ns/step)."""
+    if m == 2:
+        x, y = M[0, 0] * M[1, 1], M[1, 0] * M[0, 1]
+        dev = abs((x - y) - 1.0)
+        size = max(abs(x) + abs(y), 2.0 * abs(M[0, 0] * M[1, 0]), 2.0 * abs(M[0, 1] * M[1, 1]))
+        return dev, dev, _relative(dev, size)
+    _copy(M, B, m)
+    symp, rel = symplecticity(M, m)
+    return abs(determinant(B, m) - 1.0), symp, rel
+
+
+@njit(**IR_INLINE)
+def grow(M, e, A, B, m, scale, exponent):
     """A <- M A, scaled by an exact power of two 2^-x once its largest entry leaves [2^-RANGE,
-    2^RANGE] (x ln 2 added to state[0]: no logarithm per step); A is kept in the scaled
-    coordinates of exponent state[1] (see diagnostics.MapGrowth). False if not finite."""
+    2^RANGE] (x ln 2 added to `scale`: no logarithm per step); A is kept in the scaled coordinates
+    of `exponent` (see diagnostics.MapGrowth). Returns (finite, scale, exponent)."""
     n = m // 2
-    shift = e - int(state[1])
+    shift = e - exponent
     if shift != 0:
         qf, pf = math.ldexp(1.0, -shift), math.ldexp(1.0, shift)
         for i in range(n):
             for j in range(m):
                 A[i, j] *= qf
                 A[n + i, j] *= pf
-        state[1] = e
+        exponent = e
     big = 0.0
     for i in range(m):
         for j in range(m):
@@ -127,20 +182,20 @@ def grow(M, e, A, B, state, m):
             for r in range(m):
                 s += M[i, r] * A[r, j]
             if not np.isfinite(s):
-                return False
+                return False, scale, exponent
             B[i, j] = s
             big = max(big, abs(s))
     if big == 0.0:
-        return False
+        return False, scale, exponent
     f = 1.0
     if not (2.0 ** -RANGE < big < 2.0 ** RANGE):
         x = math.frexp(big)[1]
         f = math.ldexp(1.0, -x)
-        state[0] += x * LN2
+        scale += x * LN2
     for i in range(m):
         for j in range(m):
             A[i, j] = B[i, j] * f
-    return True
+    return True, scale, exponent
 
 
 @njit(**INLINE)
@@ -154,7 +209,7 @@ def _energy_after(P, C, end, Ce, t, z):
     return energy(P, Ce, 0, z)
 
 
-@njit(**INLINE)
+@njit(**IR_INLINE)
 def _increment_row(X, i, z, old, h, n):
     """Row i of the volume estimator's matrix: the increment of a member in (q, t, p)."""
     for r in range(n):
@@ -163,52 +218,74 @@ def _increment_row(X, i, z, old, h, n):
     X[i, n] = h
 
 
-@njit(**INLINE)
-def _reduce(k, width, t1, M, mapped, want, e, hext, X, volume, acc, env, tb, G, B, gstate, m):
-    """Fold one step's wanted figures into acc, its bin and the growth product (gstate[2] = 0
-    once that product stopped being finite)."""
-    if want & WANT_H:
-        acc[0] = _most(acc[0], abs(hext))
-    dev = symp = 0.0
-    if mapped and want & WANT_MAPS:
-        for i in range(m):
-            for j in range(m):
-                B[i, j] = M[i, j]
-        dev = abs(determinant(B, m) - 1.0)
-        symp, rel = symplecticity(M, m)
-        acc[1] = _most(acc[1], dev)
-        acc[2] = _most(acc[2], symp)
-        acc[3] = _most(acc[3], rel)
-    if mapped and G.shape[0] > 0 and gstate[2] == 1.0 and not grow(M, e, G, B, gstate, m):
-        gstate[2] = 0.0
-    if width > 0:
-        b = k // width
-        if k % width == 0:
-            tb[b] = t1
-        env[b, 0] = _least(env[b, 0], hext)
-        env[b, 1] = _most(env[b, 1], hext)
-        if volume:
-            vol = determinant(X, m + 1)
-            env[b, 2] = _least(env[b, 2], vol)
-            env[b, 3] = _most(env[b, 3], vol)
-        if mapped:
-            env[b, 4] = _most(env[b, 4], dev)
-            env[b, 5] = _most(env[b, 5], symp)
+def tangent_work(D, P):
+    """Stack scratch of member 0's tangent map (_tangent)."""
+
+
+@overload(tangent_work, jit_options=_IR_INLINE, inline="always")
+def _tangent_work(D, P):
+    if _scene(P).linear:
+        return lambda D, P: (lwork(D, P), matrices(P, 1, 0.0)[0])
+    return lambda D, P: (work(D, P, 0j), vectors(P, 1, 0j)[0])
+
+
+def _tangent(D, P, C, tk, h, zs, pt, M, TW):
+    """Member 0's one-step tangent map M at the (scaled) state zs: the step matrix on a linear
+    scene, a complex step of the member step otherwise (kernels.loops.tangent_matrix and
+    tangent_complex). Returns the status."""
+
+
+@overload(_tangent, jit_options=_INLINE)
+def _tangent_impl(D, P, C, tk, h, zs, pt, M, TW):
+    if _scene(P).linear:
+        def matrix(D, P, C, tk, h, zs, pt, M, TW):
+            LW, Q = TW
+            lmatrix(D, P, C, tk, h, M, Q, LW)
+            return OK
+        return matrix
+
+    def complex_step(D, P, C, tk, h, zs, pt, M, TW):
+        Wc, zc = TW
+        m = zs.shape[0]
+        for j in range(m):
+            for r in range(m):
+                zc[r] = zs[r]
+            zc[j] += 1j * COMPLEX_STEP
+            status, _ = step(D, P, C, tk, h, zc, pt + 0j, Wc)
+            if status != OK:
+                return status
+            for r in range(m):
+                M[r, j] = zc[r].imag / COMPLEX_STEP
+        return OK
+    return complex_step
+
+
+@njit(**IR_INLINE)
+def _flush(env, tb, b, t, bin_):
+    """Bin b's time and figures (min and max of H + p_t and of the volume estimator, max of the
+    defects) into tb and env (rows preset to the identities of min and max)."""
+    if b >= 0:
+        tb[b] = t
+        for j in range(6):
+            env[b, j] = bin_[j]
 
 
 @njit(**INLINE)
-def _members_run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, env, tb, G,
-                 gstate, scaled):
-    """Member steps (any scene); member 0's tangent map by complex step of its step."""
+def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, env, tb, G,
+           gstate, scaled):
+    """Member steps, as kernels.loops.propagate_members takes them (so a run's states are those
+    of `simulate`), and member 0's tangent map (_tangent) at the mapped steps. The figures are
+    reduced in local variables and a stack copy of the growth product, written back once per
+    call (stored into the arrays every step, they cost 6-10 ns a step: the compiler must assume
+    those stores change the states it keeps in registers)."""
     C = coef_table(D, P)
     Ce = coef_table(D, P)
     W = work(D, P, 0.0)
-    Wc = work(D, P, 0j)
-    zc = vectors(P, 1, 0j)[0]
+    TW = tangent_work(D, P)
     V = vectors(P, 3, 0.0)
     z, old, zs = V[0], V[1], V[2]
-    MB = matrices(P, 2, 0.0)
-    M, B = MB[0], MB[1]
+    MB = matrices(P, 3, 0.0)
+    M, B, A = MB[0], MB[1], MB[2]
     m = 2 * ndof(P)
     n = m // 2
     X = np.empty((m + 1, m + 1))
@@ -217,30 +294,33 @@ def _members_run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, a
     u = len(D.offsets)
     can_reuse = u > 1 and D.offsets[0] == 0.0 and D.offsets[u - 1] == 1.0
     end = u - 1 if D.offsets[u - 1] == 1.0 else -1
+    hmax, dmax, smax, rmax = acc[0], acc[1], acc[2], acc[3]
+    growing = G.shape[0] > 0 and gstate[2] == 1.0
+    if growing:
+        _copy(G, A, m)
+    gscale, gexp = gstate[0], int(gstate[1])
+    bin_ = np.empty(6)  # the current bin's figures (as env's columns)
+    b, tbin = -1, 0.0
+    status, done, in_tangent = OK, nsteps, False
     hnew = 0.0
     prev = 0
+    tau = 0.0
     up = down = 1.0
     for k in range(nsteps):
         g = first + k
-        e, tau = _coefs(P, D.offsets, t0 + g * h, t0 + (g + 1) * h, h, C, can_reuse and k > 0, prev, scaled)
-        if e != prev:
-            up, down = _factors(e)
-            prev = e
+        e, tau, up, down = _scale(P, t0 + g * h, scaled, prev, tau, up, down)
+        _coefs(P, D.offsets, t0 + g * h, t0 + (g + 1) * h, h, tau, C, can_reuse and k > 0 and e == prev)
+        prev = e
         tk = t0 + g * h - tau
         mapped = every > 0 and k % every == 0
         if mapped:
             for r in range(m):
                 zs[r] = Z[0, r]
             _rescale(zs, n, e, down, up)
-            for j in range(m):
-                for r in range(m):
-                    zc[r] = zs[r]
-                zc[j] += 1j * COMPLEX_STEP
-                status, _ = step(D, P, C, tk, h, zc, PT[0] + 0j, Wc)
-                if status != OK:
-                    return status, k, True
-                for r in range(m):
-                    M[r, j] = zc[r].imag / COMPLEX_STEP
+            status = _tangent(D, P, C, tk, h, zs, PT[0], M, TW)
+            if status != OK:
+                done, in_tangent = k, True
+                break
         t1 = t0 + (g + 1) * h
         for i in range(Z.shape[0]):
             for r in range(m):
@@ -254,63 +334,46 @@ def _members_run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, a
             sum_, comp = _add(S, Cc, i, dpt)
             status = _accept(status, i, z, old, sum_ + comp, Z, PT, 0, False, none, flat, none, m)
             if status != OK:
-                return status, k, False
+                break
             S[i], Cc[i] = sum_, comp
             if volume and 1 <= i <= m + 1:
                 _increment_row(X, i - 1, z, old, h, n)
+        if status != OK:
+            done = k
+            break
         hext = hnew + PT[0]
-        _reduce(k, width, t1, M, mapped, want, e, hext, X, volume, acc, env, tb, G, B, gstate, m)
-    return OK, nsteps, False
-
-
-@njit(**INLINE)
-def _matrix_run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, env, tb, G,
-                gstate, scaled):
-    """A linear scene: one step matrix per step (kernels.linear), applied to every member, and
-    itself member 0's tangent map."""
-    C = coef_table(D, P)
-    Ce = coef_table(D, P)
-    LW = lwork(D, P)
-    MQ = matrices(P, 3, 0.0)
-    M, Q, B = MQ[0], MQ[1], MQ[2]
-    V = vectors(P, 3, 0.0)
-    z, old, zs = V[0], V[1], V[2]
-    m = 2 * ndof(P)
-    n = m // 2
-    X = np.empty((m + 1, m + 1))
-    volume = Z.shape[0] >= m + 2
-    none, flat = np.empty((0, 0, m)), np.empty((0, 0))  # no records
-    u = len(D.offsets)
-    can_reuse = u > 1 and D.offsets[0] == 0.0 and D.offsets[u - 1] == 1.0
-    end = u - 1 if D.offsets[u - 1] == 1.0 else -1
-    hnew = 0.0
-    prev = 0
-    up = down = 1.0
-    for k in range(nsteps):
-        g = first + k
-        e, tau = _coefs(P, D.offsets, t0 + g * h, t0 + (g + 1) * h, h, C, can_reuse and k > 0, prev, scaled)
-        if e != prev:
-            up, down = _factors(e)
-            prev = e
-        tk = t0 + g * h - tau
-        s = lmatrix(D, P, C, tk, h, M, Q, LW)
-        mapped = every > 0 and k % every == 0
-        t1 = t0 + (g + 1) * h
-        for i in range(Z.shape[0]):
-            quad = apply_matrix(Z, i, M, Q, old, zs, z, m, e, up, down)
-            if i == 0 and want & WANT_H:
-                hnew = _energy_after(P, C, end, Ce, t1 - tau, z)
-            _rescale(z, n, e, up, down)
-            sum_, comp = _add(S, Cc, i, -(0.5 * quad + s))
-            status = _accept(OK, i, z, old, sum_ + comp, Z, PT, 0, False, none, flat, none, m)
-            if status != OK:
-                return status, k, False
-            S[i], Cc[i] = sum_, comp
-            if volume and 1 <= i <= m + 1:
-                _increment_row(X, i - 1, z, old, h, n)
-        hext = hnew + PT[0]
-        _reduce(k, width, t1, M, mapped, want, e, hext, X, volume, acc, env, tb, G, B, gstate, m)
-    return OK, nsteps, False
+        if want & WANT_H:
+            hmax = _most(hmax, abs(hext))
+        dev = symp = 0.0
+        if mapped and want & WANT_MAPS:
+            dev, symp, rel = defects(M, B, m)
+            dmax, smax, rmax = _most(dmax, dev), _most(smax, symp), _most(rmax, rel)
+        if mapped and growing:
+            growing, gscale, gexp = grow(M, e, A, B, m, gscale, gexp)
+        if width > 0:
+            if k % width == 0:
+                _flush(env, tb, b, tbin, bin_)
+                b, tbin = k // width, t1
+                for j in range(6):
+                    bin_[j] = env[b, j]
+            bin_[0] = _least(bin_[0], hext)
+            bin_[1] = _most(bin_[1], hext)
+            if volume:
+                vol = determinant(X, m + 1)
+                bin_[2] = _least(bin_[2], vol)
+                bin_[3] = _most(bin_[3], vol)
+            if mapped:
+                bin_[4] = _most(bin_[4], dev)
+                bin_[5] = _most(bin_[5], symp)
+    if width > 0:
+        _flush(env, tb, b, tbin, bin_)
+    acc[0], acc[1], acc[2], acc[3] = hmax, dmax, smax, rmax
+    if G.shape[0] > 0:
+        if growing:
+            _copy(A, G, m)
+        gstate[0], gstate[1] = gscale, gexp
+        gstate[2] = 1.0 if growing else 0.0
+    return status, done, in_tangent
 
 
 def with_values(P, row):
@@ -327,36 +390,6 @@ def _with_values(P, row):
     return lambda P, row: cls(*to_fixed_tuple(row, count))
 
 
-@njit(**INLINE)
-def _start(P, t, Z, Ce, zs, m):
-    """H of member 0 of Z at t, as kernels.loops.energies evaluates it."""
-    e, tau = scaling(P, t)
-    up, down = _factors(e)
-    coef(P, t - tau, Ce, 0)
-    for r in range(m):
-        zs[r] = Z[0, r]
-    _rescale(zs, m // 2, e, down, up)
-    return energy(P, Ce, 0, zs)
-
-
-def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, env, tb, G,
-           gstate, scaled):
-    """The fused loop for the scene: _matrix_run on a linear one, else _members_run."""
-
-
-@overload(_fused, jit_options=_INLINE)
-def _fused_impl(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, env, tb, G,
-                gstate, scaled):
-    run = _matrix_run if _scene(P).linear else _members_run
-
-    def impl(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, env, tb, G,
-             gstate, scaled):
-        return run(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, env, tb,
-                   G, gstate, scaled)
-
-    return impl
-
-
 @njit(**JIT)
 def survey(D, P, R, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, env, tb, G,
            gstate, status, scaled, start):
@@ -371,13 +404,13 @@ def survey(D, P, R, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc,
     if the failure came from the tangent map's complex step)."""
     D, P, R, Z, PT, S, Cc, acc, env, tb, G, gstate, status = borrow(
         (D, P, R, Z, PT, S, Cc, acc, env, tb, G, gstate, status))
-    m = 2 * ndof(P)
-    Ce = np.empty((1, ncoef(P)))
-    zs = np.empty(m)
+    Ce = coef_table(D, P)
+    zs = vectors(P, 1, 0.0)[0]
     for b in range(Z.shape[0]):
         Pb = with_values(P, R[b]) if R.shape[0] > 0 else P
         if start:
-            H0 = _start(Pb, t0 + first * h, Z[b], Ce, zs, m)
+            e, up, down = coef_at(Pb, t0 + first * h, Ce)
+            H0 = energy_at(Pb, Ce, Z[b, 0], zs, e, up, down)
             if not np.isfinite(H0):
                 status[b, 0], status[b, 1], status[b, 2] = START, 0, 0
                 continue

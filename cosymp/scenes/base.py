@@ -12,8 +12,14 @@ from ..kernels.dispatch import INLINE
 
 @njit(**INLINE)
 def unscaled(P, t):
-    """The scaling of a scene whose coefficients stay in range: none (see SceneKernel)."""
-    return 0, 0.0
+    """The scaling exponent of a scene whose coefficients stay in range: 0 (see SceneKernel)."""
+    return 0
+
+
+@njit(**INLINE)
+def unshifted(P, e):
+    """The time shift of a scene without scaling: 0."""
+    return 0.0
 
 
 @njit(**INLINE)
@@ -54,8 +60,9 @@ class Param:
 class SceneKernel:
     """The jitted functions the compiled loops dispatch to (see cosymp.kernels.dispatch).
 
-    scaling(P, t) -> (e, tau) declares a symmetry that keeps a step's arithmetic in floating-point
-    range: H(q, p, t) = H(2^-e q, 2^e p, t - tau) for the step from t. The loops then take that
+    scaling(P, t) -> e and shift(P, e) -> tau declare a symmetry that keeps a step's arithmetic in
+    floating-point range: H(q, p, t) = H(2^-e q, 2^e p, t - tau) for the step from t (tau depends
+    on e alone, so a loop computes it only where e changes: kernels.loops._scale). The loops then take that
     step on the scaled state (q 2^-e, p 2^e) with coefficients at t - tau, and scale back. The
     scaling is symplectic and constant within the step, and powers of two are exact, so every
     method takes the same step up to rounding; only values that would overflow (coefficients e^{gamma t} of the
@@ -84,6 +91,7 @@ class SceneKernel:
     efield: Callable = None
     bfield: Callable = None
     scaling: Callable = unscaled
+    shift: Callable = unshifted
     kick: Callable = None
     drift: Callable = None
     scaled_beyond: Callable = None

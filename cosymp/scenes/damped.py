@@ -18,7 +18,7 @@ def coef(P, t, C, r):
     grow = np.exp(P.gamma * t)
     kin = grow / P.m
     pot = P.m * P.w0 / grow
-    C[r, :] = 0.0
+    quadratic.clear(P, C, r)
     C[r, 0] = pot
     C[r, 3] = kin
     C[r, 4] = -P.gamma * pot
@@ -31,16 +31,22 @@ def scaling(P, t):
     """H(q, p, t) = H(q/E, p E, t - tau) with E^2 = e^{gamma tau}: the step from t is taken with
     E = 2^e nearest to e^{gamma t/2}, so the coefficients e^{+-gamma t} stay near 1 at any t."""
     if P.gamma == 0.0:
-        return 0, 0.0
-    e = int(np.rint(P.gamma * t * (0.5 / LN2)))
-    return e, e * (2.0 * LN2) / P.gamma
+        return 0
+    return int(np.rint(P.gamma * t * (0.5 / LN2)))
+
+
+@njit(**INLINE)
+def shift(P, e):
+    """tau with e^{gamma tau} = 2^(2e)."""
+    return 0.0 if e == 0 else e * (2.0 * LN2) / P.gamma
 
 
 def scaled_beyond(P):
     """Up to |gamma t| = ln 2 the scaled step has e = 0 (it is the plain step), so a run within
-    that range takes the plain steps without computing a scaling. Beyond it, plain steps are not
-    equivalent in practice: on damped with gamma = 2e-4, blanes-moan6's |H + p_t| grew from 2e-10
-    to 5e-3 by gamma t = 40 with plain steps (2e-10 to 3e-10 with scaled ones)."""
+    that range takes the plain steps without computing a scaling. Beyond it the coefficients
+    e^(+-gamma t) spread, and an ensemble's step matrix (kernels.loops.propagate_matrix) gives p_t
+    through a quadratic form whose round-off grows with that spread: blanes-moan6's |H + p_t| grew
+    to 5e-3 by gamma t = 40 with plain steps, at round-off (3e-13) with scaled ones or member steps."""
     return math.inf if P.gamma == 0.0 else LN2 / abs(P.gamma)
 
 
@@ -102,7 +108,7 @@ SCENE = Scene(
     ),
     kernel=SceneKernel(ndof=1, ncoef=quadratic.ncoef(1), linear=True, coef=coef,
                        energy=quadratic.energy, grad=quadratic.grad, hess=quadratic.hess,
-                       dhdt=quadratic.dhdt, flow=flow, scaling=scaling, kick=quadratic.kick, drift=drift,
+                       dhdt=quadratic.dhdt, flow=flow, scaling=scaling, shift=shift, kick=quadratic.kick, drift=drift,
                        scaled_beyond=scaled_beyond),
     Params=DampedParams,
     h=0.1,

@@ -14,7 +14,7 @@ DecayingParams = namedtuple("DecayingParams", "lam")
 @njit(**INLINE)
 def coef(P, t, C, r):
     a = np.exp(-P.lam * t)
-    C[r, :] = 0.0
+    quadratic.clear(P, C, r)
     C[r, 0] = C[r, 3] = a
     C[r, 4] = C[r, 7] = -P.lam * a
     quadratic.finish(P, C, r)

@@ -13,7 +13,7 @@ ModulatedParams = namedtuple("ModulatedParams", "eps alpha")
 
 @njit(**INLINE)
 def coef(P, t, C, r):
-    C[r, :] = 0.0
+    quadratic.clear(P, C, r)
     C[r, 0] = 1.0 + P.eps * np.sin(P.alpha * t)
     C[r, 3] = 1.0
     C[r, 4] = P.eps * P.alpha * np.cos(P.alpha * t)

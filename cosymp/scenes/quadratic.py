@@ -8,7 +8,7 @@ field, read by the step builders); energy, gradient, Hessian and dH/dt below ser
 import numpy as np
 from numba import njit
 
-from ..kernels.dispatch import INLINE, ndof
+from ..kernels.dispatch import INLINE, IR_INLINE, ndof
 
 
 @njit(**INLINE)
@@ -21,7 +21,7 @@ def grad(P, C, r, z, g):
         g[i] = acc
 
 
-@njit(**INLINE)
+@njit(**IR_INLINE)
 def _form(C, r, off, z, m):
     acc = 0.0 * z[0]
     for i in range(m):
@@ -50,6 +50,15 @@ def hess(P, C, r, z, Hm):
     for i in range(m):
         for j in range(m):
             Hm[i, j] = C[r, i * m + j]
+
+
+@njit(**INLINE)
+def clear(P, C, r):
+    """Zero row r's S, dS/dt, s, ds/dt and J S (a loop of known length: `C[r, :] = 0.0` runs over
+    the row's length at run time, see kernels.dispatch.IR_INLINE)."""
+    m = 2 * ndof(P)
+    for c in range(3 * m * m + 2):
+        C[r, c] = 0.0
 
 
 @njit(**INLINE)
