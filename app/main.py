@@ -28,7 +28,7 @@ from .warmup import prepare
 ASSETS = Path(__file__).resolve().parent.parent / "assets"
 NOTIFY_MS = {"error": 8000, "warning": 6000, "info": 4000}
 AHEAD_MS = 300  # a tab is built ahead at most this often (App._ahead)
-AHEAD_IDLE_S = 1.0  # after the page's last change
+AHEAD_IDLE_S = 1.0  # after the last change in any page of the server
 COPY_LINK_JS = """
 const label = 'Copy link to this view';
 const done = (text) => { source.label = text; setTimeout(() => { source.label = label; }, 2500); };

@@ -132,7 +132,11 @@ class OrbitsView(FeatureView):
         """Besides the data, the figures of every scene's usual shape (one or two degrees of
         freedom), hidden: a scene change to another shape then shows them, and builds nothing."""
         super().ahead()
-        push(lambda: [self.figures(shape(name, False, False)) for name in SCENES])
+        push(self._all_shapes)
+
+    def _all_shapes(self):
+        for name in SCENES:
+            self.figures(shape(name, False, False))
 
     def update(self):
         runs = self.study.results
