@@ -421,6 +421,12 @@ def note(obj, **kw):
     return pn.pane.HTML(obj, stylesheets=[stylesheet()], **{"sizing_mode": "stretch_width", **kw})
 
 
+def rule():
+    """A horizontal rule. Not Panel's Divider: its stylesheet is linked from Panel's CDN unless the
+    page's HTML was written by its own session (see page.serve_locally)."""
+    return note("<hr class='rule'>")
+
+
 def swatch(color, label, dashed=False):
     style = f"border-top: 3px {'dashed' if dashed else 'solid'} {color}"
     return f"<span class='swatch' style='{style}'></span>{html.escape(label)}"

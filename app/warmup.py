@@ -60,4 +60,7 @@ if __name__ == "__main__":
 
     raise SystemExit(main(["compile"]))
 if __name__ == "panel_setup_module":
+    from app.page import reuse_sessions
+
+    reuse_sessions()
     print(f"cosymp app warm-up: ready in {prepare():.1f} s", flush=True)

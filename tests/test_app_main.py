@@ -1,4 +1,6 @@
 """The served page (app/main.py) composed in-process, without a server or a browser."""
+import types
+
 import panel as pn
 
 from app import main, page
@@ -277,6 +279,13 @@ def test_tabs_are_built_ahead_one_at_a_time_while_the_page_is_idle_and_start_no_
     assert not app._ahead_done, "another page has just been opened"
     other._stop(None)
     main.App.last_change -= main.AHEAD_IDLE_S
+    gone = main.App()
+    gone._doc = types.SimpleNamespace(session_context=types.SimpleNamespace(session=types.SimpleNamespace(
+        connection_count=0)))
+    main.App.last_change -= main.AHEAD_IDLE_S
+    gone._ahead()
+    assert not gone._ahead_done, "a page whose browser has gone builds nothing ahead (its session lingers)"
+    gone._stop(None)
     for _ in range(len(FEATURES)):
         app._ahead()
     assert app._ahead_done == {f.name for f in FEATURES if f.ahead} == set(names) - {"gauges", "workprecision"}

@@ -21,7 +21,7 @@ from cosymp.scenes import SCENES
 
 from ..jobs import Job, Note
 from ..memory import MB
-from ..plotting import FLOOR, figure, legend_outside, note, pane, source, table
+from ..plotting import FLOOR, figure, legend_outside, note, pane, rule, source, table
 from ..study import theta_for
 from .base import Feature, FeatureView
 
@@ -495,7 +495,7 @@ class WorkPrecisionView(FeatureView):
                    pn.widgets.FloatInput.from_param(m.param.T, width=140), **wide),
             pn.widgets.Checkbox.from_param(m.param.peers),
             wp_row, wp_status, self.wp_failed, self.wp_hint, self.wp_box,
-            pn.layout.Divider(),
+            rule(),
             note(LONG_TEXT),
             pn.Row(pn.widgets.MultiChoice.from_param(lh.param.methods, name="Methods", **wide),
                    pn.widgets.FloatInput.from_param(lh.param.h, format="0.[000000]", width=140),
