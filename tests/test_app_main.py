@@ -1,4 +1,5 @@
 """The served page (app/main.py) composed in-process, without a server or a browser."""
+import pathlib
 import types
 
 import panel as pn
@@ -303,3 +304,35 @@ def test_tabs_are_built_ahead_one_at_a_time_while_the_page_is_idle_and_start_no_
     app.study.scene = "charged"
     assert [g.visible for g in orbits.grids] == [False, True], "the charged particle's figures were ready"
     app._stop(None)
+
+
+def test_a_session_built_ahead_of_its_page_serves_its_stylesheets_locally():
+    """app/page.reuse_sessions and serve_locally: Panel builds a reused page's session without writing
+    its HTML, so nothing sets the template variable its stylesheet links are made from; serve_locally
+    sets it before any model is made. Only useful while Panel builds warm sessions this way and reads
+    that variable: when a release changes either, this says so."""
+    import inspect
+
+    from bokeh.document import Document
+    from panel.io import server
+    from panel.io.resources import CDN_DIST
+    from panel.io.state import set_curdoc
+    from panel.reactive import Reactive
+
+    assert "create_session_if_needed" in inspect.getsource(server.DocHandler.get)
+    assert "doc._template_variables['dist_url']" in inspect.getsource(Reactive._get_properties)
+    def links(local):
+        doc = Document()
+        context = types.SimpleNamespace(session=None, server_context=None, id="x",
+                                        request=types.SimpleNamespace(arguments={}, headers={}, cookies={}))
+        doc._session_context = lambda: context  # a weak reference in a served document
+        with set_curdoc(doc):
+            if local:
+                page.serve_locally()
+            return [s.url for s in pn.widgets.Button(name="x").get_root(doc).stylesheets if hasattr(s, "url")]
+
+    assert [u for u in links(False) if u.startswith(CDN_DIST)], "without serve_locally, links to the CDN"
+    local = links(True)
+    assert local and not [u for u in local if u.startswith(CDN_DIST)], local
+    assert not [p for p in pathlib.Path(main.__file__).parent.rglob("*.py") if "Divider(" in p.read_text()], \
+        "Panel's Divider links its stylesheet from the CDN"
