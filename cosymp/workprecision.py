@@ -221,13 +221,14 @@ def step_counts(first, last):
 
 
 def measure(scene, methods=None, values=None, T=None, hs=None, theta=None, peers=False,
-            rtols=PEER_RTOLS, max_steps=1 << 20, budget=0.2, progress=None):
+            rtols=PEER_RTOLS, max_steps=1 << 20, budget=0.2, progress=None, partial=None):
     """Work-precision rows for a scene (see the module's definitions).
 
     hs: step sizes for every method (rounded so T/h is whole); by default each method starts at
     the scene's time scale and refines by STEP_GROWTH until its error is below ERROR_FLOOR,
     stops decreasing for two refinements (round-off), or max_steps is reached.
     progress(done, total, label) is called before each run; total counts methods and peers.
+    partial(rows), if given, is called with a copy of the rows so far after each run.
     """
     scene, setups = _setups(scene, methods, values, theta)
     T = scene.T if T is None else check_horizon(T)
@@ -252,6 +253,8 @@ def measure(scene, methods=None, values=None, T=None, hs=None, theta=None, peers
             report(i, total, f"{solvers[i]} h = {T / N:.3g}")
             row = method_point(s, T / N, T, z_ref, ref, unc, budget)
             rows.append(row)
+            if partial is not None:
+                partial(list(rows))
             if hs is None:
                 err = row["error"]
                 worse = worse + 1 if not err < best else 0
@@ -262,6 +265,8 @@ def measure(scene, methods=None, values=None, T=None, hs=None, theta=None, peers
         for rtol in rtols:
             report(len(setups) + j, total, f"scipy {solver} rtol = {rtol:.0e}")
             rows.append(peer_point(setups[0], solver, rtol, T, z_ref, ref, unc, budget))
+            if partial is not None:
+                partial(list(rows))
     report(total, total, "done")
     return rows
 

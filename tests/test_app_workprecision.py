@@ -1,5 +1,6 @@
 """The app's work-precision and long-horizon measurements (app.features.workprecision) and their
 plots, without a server."""
+import itertools
 import math
 import time
 
@@ -112,7 +113,8 @@ def test_cancel_stops_a_measurement_within_a_second():
 
     m.param.watch(cancel, "progress")
     m.start()
-    assert m.status.startswith("cancelled") and not m.running and m.rows == []
+    assert m.status.startswith("cancelled") and not m.running
+    assert not m.rows or m.setting.endswith("(cancelled: the runs before it)"), "the runs so far stay, said so"
     assert m.join(5)
     assert time.perf_counter() - asked[0] < 1.5
 
@@ -248,3 +250,26 @@ def test_long_horizons_can_be_cancelled():
     assert lh.status.startswith("cancelled") and lh.rows == [] and not lh.running
     assert time.perf_counter() - asked[0] < 0.5
     assert lh.join(30)
+
+
+def test_another_page_opening_the_tab_shows_this_servers_measurement_of_its_inputs_at_once(measured):
+    """A measurement is remembered by the server (views.MEASURED): a page whose inputs match shows it
+    without measuring, says when it was measured, and Start measures again; other inputs measure."""
+    _, m, _ = measured
+    same = WorkPrecision(Study(scene="decaying", theta=0.3), methods=["rk4", "theta"])
+    assert same.recall() and same.rows == m.rows and same.run is None and not same.running
+    assert same.status.startswith("measured at ") and "Start measures again" in same.status
+    assert same.setting == m.setting
+    other = WorkPrecision(Study(scene="decaying", theta=0.3), methods=["rk4"])
+    assert not other.recall() and not other.rows
+    assert not WorkPrecision(Study(scene="decaying", theta=0.4), methods=["rk4", "theta"]).recall()
+
+
+def test_a_measurement_hands_out_its_rows_so_far_after_each_run():
+    """cosymp.workprecision.measure(partial=...): the rows so far after every run, each list the
+    one before and one more row, the last one the rows returned (the app draws them as they come)."""
+    seen = []
+    rows = wp.measure("decaying", ["rk4"], T=2.0, peers=True, rtols=(1e-3, 1e-6), max_steps=64, budget=0.0,
+                      partial=seen.append)
+    assert seen[-1] == rows and len(seen) == len(rows) >= 4
+    assert all(a == b[:-1] for a, b in itertools.pairwise(seen))
