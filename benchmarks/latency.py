@@ -25,11 +25,13 @@ Playwright round trips do not enter the numbers):
   adds or removes roots. (The app builds hidden tabs ahead and fills their plots while the page is
   idle; those messages change nothing shown.) Layout read-backs from the browser
   (Figure.inner_width, sync true), widget values, HTML text and the busy spinner do not count.
-  An animation-frame poller adds a "drawn" event the first moment a Plot view is visible and has
-  finished painting after it was not (a new page's plots, the new plots of a rebuilt layout or a
+  A "drawn" event is added at the paint of a Plot view that shows it visible and finished, the
+  first such paint since the input (a new page's plots, the new plots of a rebuilt layout or a
   tab, and hidden plots shown again, such as a tab built earlier or the figures of another
-  scene's shape, which may get their data while hidden: the poller runs every frame for HOT_MS
-  after each input, which also takes the shown plots as its starting point).
+  scene's shape, which may get their data while hidden): BokehJS's PlotView paint is hooked, and
+  the plots shown and finished at the input are the starting point. Nothing polls every view (a
+  poller that did took a third of the main thread on a page with 1,500 views, slowing what it
+  measured).
 * Each counted event also records the next requestAnimationFrame callback after it: its paint.
   (After a layout swap that frame can come 0.4-2 s later: the main thread is building views.)
 * Settled: at least one counted event after the input; then the last counted event painted, no
@@ -99,7 +101,6 @@ QUIET_MS = 600               # quiet before an input; a longer gap within an upd
 SETTLE_TIMEOUT_MS = 20_000   # from the input
 QUIET_TIMEOUT_MS = 60_000    # waiting for a quiet page before an input
 CONFIRM_MS = 2_000           # settled: no counted event for this long after the last one's paint
-HOT_MS = 5_000               # new plots are looked for every frame this long after models came
 
 SCENE_HOME = "damped"        # interactions and the load start here (?scene=damped; the first view may differ)
 # Scene -> text its option shows (lower case; the key itself matches an option value or text too).
@@ -131,11 +132,11 @@ LONG_QUERY = {"scene": "kapitza", "method": "gauss6", "vs": "rk4", "h": "0.005",
 # Installed in every page before its scripts run (see the module docstring).
 INSTRUMENT_JS = """(() => {
   if (window.__latency) return;
-  const QUIET = QUIET_MS, CONFIRM = CONFIRM_MS, HOT = HOT_MS;
+  const QUIET = QUIET_MS, CONFIRM = CONFIRM_MS;
   const VISIBLE = {visibilityProperty: true, opacityProperty: true};
   const PART_NAMES = ["DataSource", "CDSView", "Plot", "Renderer", "Glyph", "Range", "Scale", "Ticker",
                       "TickFormatter", "ColorMapper"];
-  const L = window.__latency = {inputs: [], events: [], lastEvent: -Infinity, lastGraph: -Infinity,
+  const L = window.__latency = {inputs: [], events: [], lastEvent: -Infinity,
                                 before: {}};
   for (const type of ["keydown", "pointerdown", "pointermove", "pointerup", "input"])
     window.addEventListener(type, () => L.inputs.push([type, performance.now()]), true);
@@ -177,13 +178,11 @@ INSTRUMENT_JS = """(() => {
       if (seeing().inPlots.has(e.model)) record(e.kind, true, false);
     } else if (["RootAdded", "RootRemoved"].includes(e.kind)) {
       record(e.kind, false, false);
-      L.lastGraph = L.lastEvent;
     } else if (e.kind === "ModelChanged") {
       const part = parts.some((c) => e.model instanceof c), graph = hasModels(e.value, 0);
       const {inPlots, withView} = (part || graph) ? seeing() : {};
       const counts = part ? inPlots.has(e.model) : graph && withView.has(e.model);
       if (counts) record((graph ? "models:" : "") + e.model.type + "." + e.attr, part, false);
-      if (counts && graph) L.lastGraph = L.lastEvent;
     }
   };
   // Shown: laid out, and not hidden by display, visibility (inactive Bokeh tabs) or opacity.
@@ -202,37 +201,47 @@ INSTRUMENT_JS = """(() => {
   // The plot views shown and painted at the poller's last look: a plot counts as drawn when it joins.
   const hooked = new WeakSet();
   let showing = new WeakSet();
-  let anyDrawn = false;
-  // Hook new documents; note newly drawn plots every animation frame while new plot views may come
-  // (no plot drawn yet, HOT ms after models were added or replaced, or while views are building
-  // after that), else look for new documents every 50 ms.
+  // A plot counts as drawn at the paint that shows it finished, the first since the input (arm):
+  // PlotView's paint is hooked, so that only plots that paint are looked at. (Looking at every view
+  // every frame, as before, took a third of the main thread while a tab with 1,500 views was shown,
+  // and so slowed what it measured.) A plot that paints before it has finished is looked at again
+  // every frame until it has.
+  const pending = new Set();
+  const drawn = (v) => {
+    if (!v.el.isConnected || showing.has(v) || !shown(v.el)) return true;
+    if (!v.has_finished()) return false;
+    showing.add(v);
+    record("drawn:" + v.model.type, true, true);
+    return true;
+  };
+  const hookPaint = (B) => {
+    const PlotView = B.require("models/plots/plot").PlotView, paint = PlotView.prototype._actual_paint;
+    PlotView.prototype._actual_paint = function (...args) {
+      const out = paint.apply(this, args);
+      if (drawn(this)) pending.delete(this);
+      else pending.add(this);
+      return out;
+    };
+  };
+  // Hook BokehJS (every frame until it is loaded) and new documents (every 50 ms); every frame while
+  // a painted plot has not finished.
   const tick = () => {
     const B = window.Bokeh;
-    let hot = !anyDrawn;
-    if (B && B.documents && B.index && B.Models) {
-      if (parts === null) parts = PART_NAMES.map((n) => B.Models.get(n)).filter((c) => c != null);
+    if (B && B.documents && B.index && B.Models && typeof B.require === "function") {
+      if (parts === null) {
+        parts = PART_NAMES.map((n) => B.Models.get(n)).filter((c) => c != null);
+        hookPaint(B);
+        const Plot = B.Models.get("Plot");  // plots painted before the hook
+        for (const v of B.index.all_views()) if (v.model instanceof Plot && !drawn(v)) pending.add(v);
+      }
       for (const doc of B.documents) if (!hooked.has(doc)) {
         hooked.add(doc);
         doc.on_change(onChange, false);
         record("document", false, false);
-        L.lastGraph = L.lastEvent;
       }
-      const sinceGraph = performance.now() - L.lastGraph;
-      hot = hot || sinceGraph < HOT || (sinceGraph < 60_000 && building());
-      if (hot) {
-        const Plot = B.Models.get("Plot");
-        for (const v of B.index.all_views()) {
-          if (!(v.model instanceof Plot)) continue;
-          if (!shown(v.el)) showing.delete(v);
-          else if (!showing.has(v) && v.has_finished()) {
-            showing.add(v);
-            anyDrawn = true;
-            record("drawn:" + v.model.type, true, true);
-          }
-        }
-      }
+      for (const v of [...pending]) if (drawn(v)) pending.delete(v);
     }
-    if (hot) requestAnimationFrame(tick);
+    if (pending.size || parts === null) requestAnimationFrame(tick);
     else setTimeout(tick, 50);
   };
   requestAnimationFrame(tick);
@@ -266,14 +275,13 @@ INSTRUMENT_JS = """(() => {
     }
     return out;
   };
-  // Before an input: remember the plots, and look for newly shown plots every frame for HOT ms (a
-  // tab built earlier and hidden is shown without a message from the server); returns the time to
-  // look for inputs from.
+  // Before an input: remember the plots and which are shown and finished (a plot shown after it, as
+  // a tab built earlier and hidden, counts as drawn when it paints); returns the time to look for
+  // inputs from.
   L.arm = () => {
     L.before = L.plots();
     showing = new WeakSet(plotViews().filter((v) => v.has_finished()));
-    L.lastGraph = performance.now();
-    return L.lastGraph;
+    return performance.now();
   };
 
   const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
@@ -335,7 +343,7 @@ INSTRUMENT_JS = """(() => {
       await sleep(20);
     }
   };
-})();""".replace("QUIET_MS", str(QUIET_MS)).replace("CONFIRM_MS", str(CONFIRM_MS)).replace("HOT_MS", str(HOT_MS))
+})();""".replace("QUIET_MS", str(QUIET_MS)).replace("CONFIRM_MS", str(CONFIRM_MS))
 
 # The visible element matching `selector` nearest to a visible element whose whole (light-DOM)
 # text matches `pattern`: fewest steps up from both to a common ancestor, across shadow roots.
