@@ -57,8 +57,8 @@ Actions: a fresh page at the app's own first view (navigation to first plot draw
 on a page opened at ?scene=damped: the scene changed to each scene and back to damped, the method
 changed (midpoint -> gauss4 -> symplectic-euler -> midpoint), the gamma slider dragged (first move
 to first change, last move to settled), θ moved by 20 ArrowRight presses with the Lifted theta-
-method (first press to both); the first visit of each tab on a fresh page at the first view (once
-the page is quiet, and READ_S seconds later: the app builds tabs ahead while the page is idle); and
+method (first press to first change, last press to settled); the first visit of each tab on a fresh
+page at the first view (once the page is quiet, and READ_S seconds later: the app builds tabs ahead while the page is idle); and
 a load: ten damped pages each move gamma by one key press at most every 2 s (closed loop: a move waits
 until the page's previous move settled, so each latency belongs to one move and a slow server gets
 fewer moves) for 60 s while an eleventh page runs a long run (LONG_QUERY); its progress bar (a
@@ -549,6 +549,10 @@ def first_of(kind):
     return lambda inputs: next((t for k, t in inputs if k == kind), None)
 
 
+def last_of(kind):
+    return lambda inputs: next((t for k, t in reversed(inputs) if k == kind), None)
+
+
 def drag_moves(inputs):
     """(first, last) pointermove between the pointerdown and the pointerup."""
     down = next((t for k, t in inputs if k == "pointerdown"), None)
@@ -645,7 +649,7 @@ def theta_keys(page):
         for _ in range(THETA_PRESSES):
             page.keyboard.press("ArrowRight")
 
-    return measure(page, act, first_of("keydown"))
+    return measure(page, act, first_of("keydown"), last_of("keydown"))
 
 
 def run_tabs(browser, url, repeats, record):
