@@ -58,8 +58,8 @@ on a page opened at ?scene=damped: the scene changed to each scene and back to d
 changed (midpoint -> gauss4 -> symplectic-euler -> midpoint), the gamma slider dragged (first move
 to first change, last move to settled), θ moved by 20 ArrowRight presses with the Lifted theta-
 method (first press to first change, last press to settled); the first visit of each tab on a fresh
-page at the first view (once the page is quiet, and READ_S seconds later: the app builds tabs ahead while the page is idle); and
-a load: ten damped pages each move gamma by one key press at most every 2 s (closed loop: a move waits
+page at the first view (once the page is quiet, and READ_S seconds later: the app builds tabs
+ahead while the page is idle); and a load: ten damped pages each move gamma by one key press at most every 2 s (closed loop: a move waits
 until the page's previous move settled, so each latency belongs to one move and a slow server gets
 fewer moves) for 60 s while an eleventh page runs a long run (LONG_QUERY); its progress bar (a
 <progress>) is read every 5 s and its counted events are kept (the run redraws its plots as chunks
