@@ -29,6 +29,7 @@ ASSETS = Path(__file__).resolve().parent.parent / "assets"
 NOTIFY_MS = {"error": 8000, "warning": 6000, "info": 4000}
 AHEAD_MS = 300  # a tab is built ahead at most this often (App._ahead)
 AHEAD_IDLE_S = 1.0  # after the last change in any page of the server
+GONE_MS = 5000  # a page whose browser has gone this long stops (App._watch)
 COPY_LINK_JS = """
 const label = 'Copy link to this view';
 const done = (text) => { source.label = text; setTimeout(() => { source.label = label; }, 2500); };
@@ -131,6 +132,8 @@ class App(param.Parameterized):
     def _stop(self, session_context):
         """A closed page stops its background runs and gives back the memory of its results; nothing
         is drawn or notified for it any more."""
+        if self._stopped:
+            return
         self._stopped = True
         for state in self.states.values():
             if state is not None:
@@ -168,6 +171,20 @@ class App(param.Parameterized):
         for note in self._pending:
             self._notify(note.level, note.text)
         self._next_ahead()
+        if self._doc is not None and self._doc.session_context is not None:
+            self._gone = False
+            self._watcher = self._doc.add_periodic_callback(self._watch, GONE_MS)
+
+    def _watch(self):
+        """Stop the page once its browser has been gone GONE_MS or more (seen gone twice in a row). Its
+        session would be destroyed by the server's check for unused sessions, which stops it too, but
+        not the first page's: Panel keeps that session for good, to write every later page's HTML
+        from (page.reuse_sessions), and its long run or measurement went on after its page had closed."""
+        gone = self._closed()
+        if gone and self._gone:
+            self._doc.remove_periodic_callback(self._watcher)
+            self._stop(None)
+        self._gone = gone
 
     def _touch(self, *events):
         App.last_change = time.monotonic()

@@ -336,3 +336,27 @@ def test_a_session_built_ahead_of_its_page_serves_its_stylesheets_locally():
     assert local and not [u for u in local if u.startswith(CDN_DIST)], local
     assert not [p for p in pathlib.Path(main.__file__).parent.rglob("*.py") if "Divider(" in p.read_text()], \
         "Panel's Divider links its stylesheet from the CDN"
+
+
+def test_a_page_whose_browser_has_gone_stops_at_the_second_look():
+    """App._watch (every GONE_MS after the page has loaded): a page seen without a connection twice in a
+    row stops (its runs cancelled, its leases given back), as its session's destruction would do; once
+    is not enough (a connection being replaced), and the first page's session, which Panel keeps for
+    good, is not waited for."""
+    app = main.App()
+    removed = []
+    session = types.SimpleNamespace(connection_count=1)
+    app._doc = types.SimpleNamespace(session_context=types.SimpleNamespace(session=session),
+                                     remove_periodic_callback=removed.append)
+    app._gone, app._watcher = False, "watcher"
+    app._watch()
+    session.connection_count = 0
+    app._watch()
+    assert not app._stopped and not removed, "gone once"
+    session.connection_count = 1
+    app._watch()
+    session.connection_count = 0
+    app._watch()
+    assert not app._stopped, "back, then gone once again"
+    app._watch()
+    assert app._stopped and removed == ["watcher"] and app.study._closed
