@@ -357,23 +357,18 @@ def deferred_graph(doc):
     """Like Bokeh's `doc.models.freeze()`, one recomputation of the document's model graph at the
     end for every change of a model reference made inside, but none when no reference changed: a
     data update changes none, and freeze() walked every model of the page (25-35 ms) after each.
-    Bokeh asks for a recomputation through `models.invalidate()`; inside, that only takes note. The
-    freezes Panel makes inside (one per component it updates) end without a recomputation of their
-    own: building a tab ahead recomputed the graph of the page's 3,600 models four times (0.2-0.9 s)."""
+    Bokeh asks for a recomputation through `models.invalidate()`; inside, that only takes note."""
     models = doc.models
     if models._freeze_count or "invalidate" in vars(models):  # an outer freeze recomputes for us
         yield
         return
     asked = []
-    roots = list(doc.roots)
     models.invalidate = lambda: asked.append(True)
-    models._push_freeze()
     try:
         yield
     finally:
-        models._freeze_count -= 1  # not _pop_freeze, which recomputes
         del models.invalidate
-        if asked or list(doc.roots) != roots:
+        if asked:
             models.recompute()
 
 

@@ -129,8 +129,7 @@ def test_the_design_is_computed_once_per_component_class_and_handed_out_as_copie
 
 def test_a_data_update_does_not_walk_the_model_graph_and_a_new_model_is_attached_once():
     """plotting.deferred_graph: Bokeh's freeze() walks every model of the page when it ends; a data
-    update changes no reference and needs no walk, a new range does and gets one, at the end, also
-    when Panel's own freezes end inside."""
+    update changes no reference and needs no walk, a new range does and gets one, at the end."""
     from bokeh.document import Document
     from bokeh.models import Range1d
 
@@ -153,11 +152,6 @@ def test_a_data_update_does_not_walk_the_model_graph_and_a_new_model_is_attached
         fig.y_range = Range1d(0, 2)
         assert doc.models.get_by_id(new.id) is None, "deferred until the end"
     assert walks == [1] and doc.models.get_by_id(new.id) is new and "invalidate" not in vars(doc.models)
-    with plotting.deferred_graph(doc):
-        for _ in range(3):  # Panel freezes the graph around each component it updates
-            with doc.models.freeze():
-                fig.x_range = Range1d(0, 3)
-    assert walks == [1, 1] and doc.models._freeze_count == 0, "one walk, at the end, not one per freeze"
 
 
 def test_the_layouts_shim_still_matches_bokehjs():
