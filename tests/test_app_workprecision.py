@@ -48,14 +48,15 @@ def test_the_plots_draw_every_finite_point_and_the_targets_table_names_the_ratio
     _, m, _ = measured
     plot = views.WorkPrecisionPlot("error", "", lambda row: None)
     plot.set(m.rows)
-    drawn = [(src, r) for src, r in plot.curves.pool if len(src.data["x"])]
-    lines = {item.label.value: item.renderers[0] for item in plot.curves.legend.items}
-    assert [r for _, r in drawn] == list(lines.values()), "the legend lists exactly the drawn lines"
-    assert all(r in plot.fig.renderers for r in lines.values()), "lines are the figure's own, built with it"
-    styles = {label: r.glyph.line_dash for label, r in lines.items()}
-    assert styles["rk4"] == [] and styles["scipy-DOP853"] == [6]  # solid, and Bokeh's "dashed"
+    curves = plot.curves.source.data
+    items = plot.curves.legend.items
+    assert [item.index for item in items] == list(range(len(curves["xs"]))), "the legend lists exactly the lines"
+    assert all(item.renderers == [plot.curves.lines] for item in items)
+    assert plot.curves.lines in plot.fig.renderers, "the lines are the figure's own, built with it"
+    styles = {item.label.value: curves["dash"][item.index] for item in items}
+    assert styles["rk4"] == "solid" and styles["scipy-DOP853"] == "dashed"
     points = plot.points.data
-    assert len(points["x"]) == len(views.wp_points(m.rows, "error")) == sum(len(src.data["x"]) for src, _ in drawn)
+    assert len(points["x"]) == len(views.wp_points(m.rows, "error")) == sum(len(x) for x in curves["xs"])
     assert set(points["marker"]) == {"circle", "square"}
     assert set(points) == set(views.POINT_COLUMNS) == set(views.WorkPrecisionPlot("error", "", None).points.data), \
         "the glyph's columns exist before the first data (else 'nonexistent field' console warnings)"

@@ -306,31 +306,30 @@ def wp_points(rows, key):
     return [r for r in rows if finite(r["wall_s"]) and finite(r[key])]
 
 
-POOL = 24  # curves a plot can show at once: every method, θ variants and scipy's solvers
-
-
 class Curves:
     """Log-log curves, one per solver, in the solver's colour, scipy's dashed, with a legend beside
-    the plot. Their POOL line renderers are built with the figure and reused: a renderer added to a
-    figure already on the page drew its line as a streak in the left margin (x at the canvas edge)."""
+    the plot: the rows of one multi-line renderer built with the figure (a renderer added to a figure
+    already on the page drew its line as a streak in the left margin; a pool of 24 line renderers per
+    plot, used before, made the tab's four plots 0.7 s of the server's time to build), each legend
+    item showing its row."""
 
     def __init__(self, fig):
         self.fig = fig
-        self.pool = [(src := source(), fig.line("x", "y", source=src, line_width=1.5)) for _ in range(POOL)]
+        self.source = source()
+        self.source.data = {"xs": [], "ys": [], "color": [], "dash": []}
+        self.lines = fig.multi_line("xs", "ys", source=self.source, line_color="color", line_dash="dash",
+                                    line_width=1.5)
         self.legend = legend_outside(fig, [])  # built with the figure: one added later has no view
 
     def set(self, curves):
-        """curves: {label: (x, y, dashed, solver)} drawn in the solver's colour, the first POOL of
-        them; every other line is emptied, and the legend lists these."""
-        shown = list(curves.items())[:POOL]
-        for k, (src, r) in enumerate(self.pool):
-            if k < len(shown):
-                _, (x, y, dashed, solver) = shown[k]
-                r.glyph.update(line_color=method_color(solver), line_dash="dashed" if dashed else "solid")
-                src.data = {"x": np.asarray(x, float), "y": np.asarray(y, float)}
-            elif len(src.data["x"]):
-                src.data = {"x": np.empty(0), "y": np.empty(0)}
-        self.legend.items = [LegendItem(label=label, renderers=[self.pool[k][1]]) for k, (label, _) in enumerate(shown)]
+        """curves: {label: (x, y, dashed, solver)} drawn in the solver's colour; the legend lists
+        them."""
+        rows = list(curves.values())
+        self.source.data = {"xs": [np.asarray(x, float) for x, _, _, _ in rows],
+                            "ys": [np.asarray(y, float) for _, y, _, _ in rows],
+                            "color": [method_color(solver) for _, _, _, solver in rows],
+                            "dash": ["dashed" if dashed else "solid" for _, _, dashed, _ in rows]}
+        self.legend.items = [LegendItem(label=label, renderers=[self.lines], index=k) for k, label in enumerate(curves)]
 
 
 POINT_COLUMNS = ("x", "y", "solver", "run", "steps", "error_text", "wall_text", "H_text", "det_text", "color",
