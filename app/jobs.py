@@ -191,8 +191,9 @@ class Job(param.Parameterized):
             self.request()
 
     def cancel(self):
-        """Stop the computation under way at its next progress report."""
-        self._wanted = self._done
+        """Stop the computation under way at its next progress report (and what was asked for after
+        it); a request made after this runs once that computation has stopped."""
+        self._done = self._wanted = max(self._done, self._wanted)
         if self.run is not None:
             self.run.cancelled = True
 

@@ -360,3 +360,31 @@ def test_a_page_whose_browser_has_gone_stops_at_the_second_look():
     assert not app._stopped, "back, then gone once again"
     app._watch()
     assert app._stopped and removed == ["watcher"] and app.study._closed
+
+
+def test_a_scene_change_drops_another_scenes_long_run_and_map_and_the_shown_tab_computes_the_new_one():
+    """The Long run and the Stability map show only the study's scene: a scene change stops the run
+    under way and drops the old data; the shown tab then runs the new scene (after the stopped run:
+    Job.cancel and a request after it), a hidden one when it is next shown."""
+    app = main.App()
+    app.study.scene = "damped"
+    lr = app.states["long"]
+    switched = []
+
+    def switch(event):  # mid-run (the run is synchronous without a server): change the scene
+        if event.new > 0 and not switched:
+            switched.append(True)
+            app.study.scene = "decaying"
+
+    lr.param.watch(switch, "progress")
+    app.study.view = "long"
+    assert switched and not lr.running
+    assert lr.setting.startswith("decaying:") and lr.data and lr.status.startswith("done"), (lr.setting, lr.status)
+    app.study.view = "map"
+    assert app.states["map"].result.plan.scene == "decaying"
+    app.study.view = "compare"
+    app.study.scene = "damped"
+    assert not lr.data and not lr.setting and app.states["map"].result is None, "the old scene's data goes"
+    app.study.view = "map"
+    assert app.states["map"].result.plan.scene == "damped"
+    app._stop(None)

@@ -81,7 +81,7 @@ def test_failed_runs_are_not_plotted_but_listed():
 
 def test_tapping_a_cosymp_point_opens_it_in_the_orbits_view(measured):
     s, m, _ = measured
-    s.param.update(scene="damped", view="workprecision")
+    s.param.update(method="midpoint", h=0.05, T=3.0, view="workprecision")  # a scene change drops the rows
     plot = views.WorkPrecisionPlot("error", "", m.open_row)
     plot.set(m.rows)
     points = views.wp_points(m.rows, "error")
@@ -274,3 +274,12 @@ def test_a_measurement_hands_out_its_rows_so_far_after_each_run():
                       partial=seen.append)
     assert seen[-1] == rows and len(seen) == len(rows) >= 4
     assert all(a == b[:-1] for a, b in itertools.pairwise(seen))
+
+
+def test_a_scene_change_drops_the_rows_of_the_old_scene():
+    s = Study(scene="decaying")
+    m = WorkPrecision(s, methods=["rk4"], peers=False, T=2.0)
+    m.start()
+    assert m.rows and m.setting.startswith("decaying")
+    s.scene = "damped"
+    assert not m.rows and not m.setting and m.job is None

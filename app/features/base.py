@@ -44,16 +44,18 @@ class FeatureView(pn.viewable.Viewer):
             self._stale = True
         return self._layout
 
-    def first_shown(self):
-        """Called once, when the tab is first shown (a tab whose data is measured on demand starts
-        its first measurement here, so that it never opens empty)."""
+    def wanted(self):
+        """Called when the tab is shown, and when the study's scene changes while it is shown: a tab
+        whose data is measured on demand starts a measurement here when it has none (its state drops
+        the data of another scene), so that it never shows an empty tab or another scene's data."""
 
     def shown(self):
-        """Its tab has become the shown one: the first time, its first measurement starts; data
-        that changed meanwhile is drawn."""
+        """Its tab has become the shown one: a measurement starts if it has no data (`wanted`);
+        data that changed meanwhile is drawn."""
         if not self._opened:
             self._opened = True
-            self.first_shown()
+            self.study.param.watch(lambda event: self.visible and self.wanted(), ["scene"])
+        self.wanted()
         if self._layout is not None and self._stale:
             self.redraw()
 

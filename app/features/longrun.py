@@ -71,8 +71,10 @@ class LongRun(Job):
         study.param.watch(self._on_scene, ["scene"])
 
     def _on_scene(self, event):
-        if not self.running:
-            self.T_long = long_horizon(self.study.scene, self.study.T)
+        """Another scene: the run under way stops and the old scene's data goes (the view starts a
+        run of the new one when its tab is shown: `wanted`)."""
+        self.cancel()
+        self.param.update(data={}, setting="", T_long=long_horizon(self.study.scene, self.study.T))
 
     def say(self, note_):
         self.study.say(note_)
@@ -135,6 +137,8 @@ class LongRun(Job):
         return done, all(active)
 
     def _partial(self, inputs, data):
+        if inputs[4] != self.study.scene:  # the last envelopes of a run stopped by a scene change
+            return
         self.data = data
         for label, d in data.items():
             if d["failure"] and label not in self._said:
@@ -214,9 +218,10 @@ class LongRunView(FeatureView):
             grid(*[pane(p.fig) for p in self.plots.values()]),
             sizing_mode="stretch_width")
 
-    def first_shown(self):
-        if not self.state.data and not self.state.running:
-            self.state.start()
+    def wanted(self):
+        lr = self.state
+        if not lr.data and (not lr.running or lr.run.cancelled):
+            lr.request()
 
     def update(self):
         data = self.state.data

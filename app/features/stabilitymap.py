@@ -109,6 +109,12 @@ class StabilityMap(Job):
         self.study.say(note_)
 
     def _on_scene(self, *events):
+        """The axes of the study's scene and method; after a change of either, the map under way
+        stops and the old map goes (the view computes the new one when its tab is shown: `wanted`)."""
+        if events:
+            self.cancel()
+            self.job = None
+            self.param.update(result=None, setting="")
         names = sweep.variables(self.study.scene_obj, METHODS[self.study.method])
         self.param.x.objects = self.param.y.objects = names
         if events and all(e.name == "method" for e in events) and {self.x, self.y} <= set(names):
@@ -307,9 +313,10 @@ class StabilityMapView(FeatureView):
         return pn.Column(self.text, pn.widgets.Select.from_param(m.param.measure, width=200), axis("x"), axis("y"),
                          row, status, self.box, self.failures, sizing_mode="stretch_width")
 
-    def first_shown(self):
-        if self.state.result is None and not self.state.running:
-            self.state.start()
+    def wanted(self):
+        m = self.state
+        if m.result is None and (not m.running or m.run.cancelled):
+            m.request()
 
     def update(self):
         m = self.state

@@ -114,8 +114,15 @@ class Measurement(Job):
         study.param.watch(self._on_scene, ["scene"])
 
     def _on_scene(self, event):
+        self.drop()
         self.param.methods.objects = applicable(self.study.scene, METHODS)
         self.methods = applicable(self.study.scene, self.DEFAULTS)
+
+    def drop(self):
+        """Another scene: the measurement under way stops and the old scene's rows go."""
+        self.cancel()
+        self.job = None
+        self.param.update(rows=[], setting="")
 
     @property
     def PREFIX(self):
@@ -178,6 +185,8 @@ class WorkPrecision(Measurement):
                           progress=run.report, partial=run.publish)
 
     def _partial(self, job, rows):
+        if job.scene != self.study.scene:  # the last rows of a measurement stopped by a scene change
+            return
         self.job = job
         self.param.update(rows=rows, setting=f"{self._describe(job)} (measuring)")
 
@@ -251,6 +260,7 @@ class LongHorizons(Measurement):
         return {"methods": applicable(scene.name, wp.DRIFT_METHODS), "h": scene.h, "T_max": default_top(scene.h)}
 
     def _on_scene(self, event):
+        self.drop()
         self.param.methods.objects = applicable(self.study.scene, METHODS)
         self.param.update(self._defaults())
 
@@ -548,10 +558,10 @@ class WorkPrecisionView(FeatureView):
             long_row, long_status, self.long_failed, self.long_box,
             **wide)
 
-    def first_shown(self):
+    def wanted(self):
         m = self.state.measure
-        if not m.rows and not m.running and not m.recall():
-            m.start()
+        if not m.rows and (not m.running or m.run.cancelled) and not m.recall():
+            m.request()
 
     def update(self):
         m, lh = self.state.measure, self.state.long
