@@ -8,18 +8,30 @@ step. A run is cut into compiled calls of at most CHUNK steps (the one chunking 
 call's end is a point for progress and cancel).
 """
 import math
+import time
 
 import numpy as np
 
 from . import warm
 from .diagnostics import MapGrowth, log_norms
-from .errors import RunError
-from .integrate import _exact_overflows, check_step, failure_message, initial_states, start_pt
+from .errors import InputError, RunError
+from .integrate import (
+    MAX_RECORDED,
+    Trajectory,
+    _exact_overflows,
+    check_step,
+    failure_message,
+    initial_states,
+    records,
+    start_pt,
+)
 from .kernels.families import OK
+from .kernels.loops import energies
 from .kernels.survey import ACC, ENV, WANT_H, WANT_MAPS, survey
 
 CHUNK = 1 << 18
 NO_ROWS = np.empty((0, 0))  # survey's R for a run with the setup's own parameters
+NO_FIGURES = np.empty((0, 3))  # survey's F for a call without records
 DIAG_MAPS = 1 << 16
 
 
@@ -103,13 +115,7 @@ class Drive:
         env[:, 1::2] = -math.inf
         env[:, 4:] = -math.inf  # stays so in a bin without a sampled map: NaN below
         tb = np.empty(bins)
-        ends = (self.t0 + self.done * self.h, self.t0 + (self.done + steps) * self.h)
-        scaled = s.scene.needs_scaling(s.P, max(abs(ends[0]), abs(ends[1])))
-        out = np.zeros((1, 3), dtype=np.int64)
-        survey(s.data, s.P, NO_ROWS, self.t0, self.done, self.h, self.Z[None], self.PT[None], self._sum[None],
-               self._comp[None], steps, self.every, self.want, self.width, self.acc[None], env, tb, self._G[None],
-               self._gstate[None], out, scaled, False)
-        status, k, in_tangent = out[0]
+        status, k, in_tangent = self._call(steps, env, tb, *_no_records(N, m))
         self.done += k
         self.t = self.t0 + self.done * self.h
         if status != OK:
@@ -125,6 +131,56 @@ class Drive:
         if N < m + 2:
             out["vol_min"] = out["vol_max"] = np.full(bins, math.nan)
         return out
+
+    def _call(self, steps, env, tb, stride, Trec, Zrec, PTrec, dZrec, F):
+        """One call of the fused loop from the run's current state: (status, k, in_tangent)."""
+        s = self.setup
+        ends = (self.t0 + self.done * self.h, self.t0 + (self.done + steps) * self.h)
+        scaled = s.scene.needs_scaling(s.P, max(abs(ends[0]), abs(ends[1])))
+        out = np.zeros((1, 3), dtype=np.int64)
+        survey(s.data, s.P, NO_ROWS, self.t0, self.done, self.h, self.Z[None], self.PT[None], self._sum[None],
+               self._comp[None], steps, self.every, self.want, self.width, self.acc[None], env, tb, self._G[None],
+               self._gstate[None], out, scaled, False, stride, Trec, Zrec, PTrec, dZrec, F)
+        return out[0]
+
+    def record(self, steps, stride, increments=False):
+        """`steps` steps in one compiled call (a Drive made with every = stride and no bins),
+        recording every member's state at every stride-th step and the last, as `simulate`
+        records them (the same steps: member steps), and the figures of each record: returns
+        (Trajectory, F) with F (records - 1, 3) as kernels.survey gives it (|det M - 1| and
+        ||M^T J M - J|| of the map from each record but the last, the paper's volume estimator
+        into each record but the first; NaN columns where the Drive forms no maps or has no
+        volume members). A failure raises RunError carrying the Trajectory up to it, as
+        simulate's does."""
+        if self.width or self.every not in (0, stride) or self.growth is not None:
+            raise ValueError("record() needs a Drive with every = stride (or no maps), no bins and no growth")
+        N, m = self.Z.shape
+        K = records(steps, stride)
+        if K * N * (m + 1) * (3 if increments else 1) > MAX_RECORDED:
+            raise InputError(f"recording {K} states of {N} trajectories exceeds the memory cap "
+                             f"({MAX_RECORDED:.0e} values): pass a larger stride")
+        Trec, Zrec, PTrec = np.empty(K), np.empty((K, N, m)), np.empty((K, N))
+        dZrec = np.empty((K, N, m)) if increments else np.empty((0, N, m))
+        F = np.full((K - 1, 3), np.nan)
+        began = time.perf_counter()
+        status, k, in_tangent = self._call(steps, np.empty((0, len(ENV))), np.empty(0), stride, Trec, Zrec, PTrec,
+                                           dZrec, F)
+        wall = time.perf_counter() - began
+        kept = K if status == OK else k // stride + 1
+        H = np.empty((kept, N))
+        energies(self.setup.P, Trec[:kept], Zrec[:kept], H)
+        traj = Trajectory(self.setup, self.h, stride, Trec[:kept], Zrec[:kept], PTrec[:kept], H, int(k), wall,
+                          dZrec[:kept] if increments else None)
+        self.done += k
+        self.t = self.t0 + self.done * self.h
+        if status != OK:
+            step = round(self.t0 / self.h) + self.done
+            msg = failure_message(status, step, self.t, self.h, not in_tangent and _exact_overflows(self.setup, self.t))
+            self.failure = traj.failure = f"tangent map: {msg}" if in_tangent else msg
+            raise RunError(self.failure, self.t, self.done, traj)
+        if not self.want & WANT_MAPS:
+            F[:, :2] = np.nan
+        return traj, F
 
     def run(self, steps, progress=None, strict=True):
         """advance() in calls of at most CHUNK steps (a multiple of `unit`), progress(done, steps)
@@ -149,6 +205,11 @@ def concat(parts):
     if not parts:
         return {}
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+
+def _no_records(N, m):
+    """survey's stride and records for a call that records nothing."""
+    return 1, np.empty(0), np.empty((0, N, m)), np.empty((0, N)), np.empty((0, N, m)), NO_FIGURES
 
 
 def batchable(setup):
@@ -176,7 +237,7 @@ def batch_runs(setup, h, steps, R, Z0, with_det=True, growth=False, energy=True)
     Z = np.array(Z0, dtype=float).reshape(B, 1, m)
     PT, S, Cc = np.empty((B, 1)), np.empty((B, 1)), np.empty((B, 1))
     survey(setup.data, setup.P, R, 0.0, 0, float(h), Z, PT, S, Cc, int(steps), every, want, 0, acc,
-           np.empty((0, len(ENV))), np.empty(0), G, gstate, status, scaled, True)
+           np.empty((0, len(ENV))), np.empty(0), G, gstate, status, scaled, True, *_no_records(1, m))
     if not want & WANT_H:
         acc[:, 0] = math.nan
     if not want & WANT_MAPS:

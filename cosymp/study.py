@@ -1,8 +1,11 @@
 """Everything a comparison view shows about one method on one scene, computed without any UI.
 
 `compare` runs the method on the scene's initial condition together with the nearby states of
-the paper's estimators and, optionally, a small loop of initial conditions (the carried
-cloud), all in one compiled loop, and derives every diagnostic of PHYSICS.md section 4.
+the paper's estimators in one pass of the fused driver (cosymp.drive), which records the states
+and forms each recorded step's tangent map, its determinant and symplecticity defect and the
+paper's volume estimator as it steps; optionally a small loop of initial conditions (the
+carried cloud) runs in one more compiled loop; the other diagnostics of PHYSICS.md section 4
+come from the records.
 """
 import dataclasses
 import time
@@ -11,20 +14,17 @@ from dataclasses import dataclass
 import numpy as np
 
 from .diagnostics import (
-    det_deviation,
     distance,
     loop_action,
     nearby_states,
     norm,
     paper_symplectic_form,
-    paper_volume_form,
     ring_states,
     separation_omega,
-    symplecticity_defect,
-    tangent_maps,
 )
-from .errors import RunError
-from .integrate import Setup, check_step, initial_states, simulate
+from .drive import Drive
+from .errors import InputError, RunError
+from .integrate import Setup, check_step, default_stride, initial_states, simulate
 from .scenes import charged
 from .summary import transport
 
@@ -85,12 +85,16 @@ def compare(setup, h, T, delta=1e-4, cloud_points=0, cloud_radius=0.05, stride=N
     """Run `setup` and derive its diagnostics; see Comparison. The cloud is recorded at about
     CLOUD_SAMPLES times (a multiple of the run's stride)."""
     start = time.perf_counter()
-    check_step(h, T)
+    steps = check_step(h, T)
     base = initial_states(setup, z0)[0]
     n = setup.scene.ndof
-    run = simulate(setup, h, T, z0=nearby_states(base, delta, 2 * n + 1), stride=stride,
-                   increments=True)
-    M = tangent_maps(run)
+    members = nearby_states(base, delta, 2 * n + 1)
+    if stride is None:
+        stride = default_stride(steps, len(members), 2 * n, increments=True)
+    elif not isinstance(stride, (int, np.integer)) or stride < 1:
+        raise InputError(f"stride = {stride} must be a positive whole number")
+    stride = int(stride)
+    run, figures = Drive(setup, h, z0=members, every=stride, energy=False).record(steps, stride, increments=True)
     cloud = None
     area = np.empty(0)
     if cloud_points:
@@ -107,8 +111,8 @@ def compare(setup, h, T, delta=1e-4, cloud_points=0, cloud_radius=0.05, stride=N
     Pi = None
     if setup.scene.name == "charged":
         Pi = charged.mechanical(setup.P, run.t, run.q[:, 0], run.p[:, 0])
-    return Comparison(setup, run, det_deviation(M), symplecticity_defect(M), paper_symplectic_form(run),
-                      paper_volume_form(run), separation_omega(run) / delta ** 2, cloud, area, error, Pi,
+    return Comparison(setup, run, figures[:, 0], figures[:, 1], paper_symplectic_form(run),
+                      figures[:, 2], separation_omega(run) / delta ** 2, cloud, area, error, Pi,
                       time.perf_counter() - start, "the exact flow" if error is not None else None)
 
 

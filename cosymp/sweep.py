@@ -125,9 +125,13 @@ class Plan:
 
     def points(self, indices):
         """point() of each flat index."""
+        cols = self.columns(indices)
+        return [dict(zip(cols, vals)) for vals in zip(*(c.tolist() for c in cols.values()))]
+
+    def columns(self, indices):
+        """{name: (len(indices),) array} of the varied names' values at flat indices."""
         idx = np.unravel_index(np.asarray(indices, dtype=np.int64), self.shape)
-        cols = [np.asarray(a.values)[i].tolist() for a, i in zip(self.axes, idx)]
-        return [dict(zip([a.name for a in self.axes], vals)) for vals in zip(*cols)]
+        return {a.name: np.asarray(a.values)[i] for a, i in zip(self.axes, idx)}
 
     def step_counts(self):
         """(steps of each (h, T) pair of the grid, how many points share each pair): from the h and
@@ -220,33 +224,42 @@ def figures(setup, h, T, measures):
 
 def evaluate(p, indices, stop=None):
     """Figures of the points at flat indices, in order: (indices, {measure: array}, statuses,
-    seconds). Stops early (fewer points) once `stop` (a threading.Event) is set. Points that
-    share a run (h, T, theta) and differ in scene parameters run BATCH at a time in one compiled
-    call (drive.batch_runs) where the measures allow it; the others, and any point of a batch
-    that failed (for its message), one by one (figures)."""
+    seconds). Stops early (fewer points) once `stop` (a threading.Event) is set. Consecutive
+    points that share a run (h, T, theta) and differ in scene parameters run BATCH at a time in
+    one compiled call (drive.batch_runs) where the measures allow it; the others, and any point
+    of a batch that failed (for its message), one by one (figures)."""
     start = time.perf_counter()
-    cols = {k: [] for k in p.measures}
+    indices = np.asarray(list(indices), dtype=np.int64)
+    cols = p.columns(indices)
+    out = {k: np.full(len(indices), math.nan) for k in p.measures}
     statuses = []
-    done = []
-    indices = list(indices)
     batched = _batched(p)
-    points = p.points(indices)
     pos = 0
-    while pos < len(indices) and not (stop is not None and stop.is_set()):
-        group = indices[pos:pos + (BATCH if batched else 1)]
-        if batched:
-            key = _run_key(points[pos])
-            group = group[:next((j for j in range(1, len(group)) if _run_key(points[pos + j]) != key), len(group))]
-            results = _batch_figures(p, points[pos:pos + len(group)])
-        else:
-            results = [_point_figures(p, points[pos])]
-        for values, status in results:
-            for k in p.measures:
-                cols[k].append(values[k])
-            statuses.append(status)
-        done.extend(group)
-        pos += len(group)
-    return done, {k: np.array(v, dtype=float) for k, v in cols.items()}, statuses, time.perf_counter() - start
+    for end in _groups(cols, len(indices), batched):
+        if stop is not None and stop.is_set():
+            break
+        part = {name: c[pos:end] for name, c in cols.items()}
+        results = _batch_figures(p, part) if batched else _each_figures(p, part)
+        for k in p.measures:
+            out[k][pos:end] = results[0][k]
+        statuses.extend(results[1])
+        pos = end
+    return (indices[:pos].tolist(), {k: v[:pos] for k, v in out.items()}, statuses,
+            time.perf_counter() - start)
+
+
+def _groups(cols, count, batched):
+    """Where evaluate's compiled calls end: after BATCH points, and wherever the run (h, T,
+    theta) changes (every point alone where the points cannot be batched)."""
+    if not batched or count == 0:
+        return list(range(1, count + 1))
+    run = [cols[name] for name in RUN_NAMES if name in cols]
+    changes = np.flatnonzero(np.any([c[1:] != c[:-1] for c in run], axis=0)) + 1 if run else np.empty(0, int)
+    ends = []
+    for a, b in zip([0, *changes.tolist()], [*changes.tolist(), count]):
+        ends.extend(range(min(a + BATCH, b), b, BATCH))
+        ends.append(b)
+    return ends
 
 
 def _point_figures(p, point):
@@ -257,42 +270,58 @@ def _point_figures(p, point):
         return {k: math.nan for k in p.measures}, str(e)
 
 
+def _each_figures(p, cols):
+    """({measure: array}, statuses) of the points of cols, one run each."""
+    names = list(cols)
+    results = [_point_figures(p, dict(zip(names, vals))) for vals in zip(*(cols[n].tolist() for n in names))]
+    return {k: np.array([r[0][k] for r in results], dtype=float) for k in p.measures}, [r[1] for r in results]
+
+
 def _batched(p):
     """Whether the plan's points can run in batches: measures of the run alone (no reference), a
-    method with maps where maps are measured, and a scene whose parameters are all numbers."""
+    method with maps where maps are measured, a scene whose parameters are all numbers, and
+    varied scene parameters that are fields of its parameter tuple or initial conditions."""
     if not set(p.measures) <= BATCHED_MEASURES:
         return False
-    return batchable(p.run_of(p.point(0))[0])
-
-
-def _run_key(point):
-    return tuple(point.get(name) for name in RUN_NAMES)
-
-
-def _batch_figures(p, points):
-    """[(measures, status)] of points sharing a run, from one compiled call; a failed point is
-    run again on its own for its message."""
-    setup, h, T = p.run_of(points[0])
+    setup = p.run_of(p.point(0))[0]
     scene = setup.scene
-    fixed = dict(p.values)
-    rows, starts = [], []
-    for point in points:
-        vals = scene.values({**fixed, **{k: v for k, v in point.items() if k not in RUN_NAMES}})
-        rows.append(tuple(scene.pack(vals)))
-        starts.append(np.concatenate(scene.initial(vals)))
+    direct = set(scene.Params._fields) | {q.name for q in scene.params if q.initial}
+    return batchable(setup) and all(a.name in direct for a in p.axes if a.name not in RUN_NAMES)
+
+
+def _batch_figures(p, cols):
+    """({measure: array}, statuses) of points sharing a run, from one compiled call; a failed
+    point is run again on its own for its message. The parameter rows and initial states are
+    the first point's, with the varied scene parameters' columns replaced (drive.batchable: the
+    scene's parameter tuple holds its parameters by name); the plan checked the grid's corners
+    against the parameters' bounds, which are intervals."""
+    size = len(next(iter(cols.values())))
+    first = {name: float(c[0]) for name, c in cols.items()}
+    setup, h, T = p.run_of(first)
+    scene = setup.scene
+    vals = scene.values({**dict(p.values), **{k: v for k, v in first.items() if k not in RUN_NAMES}})
+    R = np.tile(np.array(scene.pack(vals), dtype=float), (size, 1))
+    Z0 = np.tile(np.concatenate(scene.initial(vals)), (size, 1))
+    starts = [q.name for q in scene.params if q.initial]
+    for name, c in cols.items():
+        if name in scene.Params._fields:
+            R[:, scene.Params._fields.index(name)] = c
+        elif name in starts:
+            Z0[:, starts.index(name)] = c
     steps = check_step(h, T)
-    out = batch_runs(setup, h, steps, np.array(rows), np.array(starts), with_det="det_max_dev" in p.measures,
+    out = batch_runs(setup, h, steps, R, Z0, with_det="det_max_dev" in p.measures,
                      growth="growth" in p.measures, energy="H_ext_max_abs" in p.measures)
-    results = []
-    for j, point in enumerate(points):
-        if out["failed"][j]:
-            results.append(_point_figures(p, point))
-            continue
-        values = {"H_ext_max_abs": out["H_ext_max_abs"][j], "det_max_dev": out["det_max_dev"][j]}
-        if "growth" in p.measures:
-            values["growth"] = out["growth"][j] / (steps * h)
-        results.append(({k: float(values[k]) for k in p.measures}, "ok"))
-    return results
+    values = {"H_ext_max_abs": out["H_ext_max_abs"], "det_max_dev": out["det_max_dev"]}
+    if "growth" in p.measures:
+        values["growth"] = out["growth"] / (steps * h)
+    values = {k: np.array(values[k], dtype=float) for k in p.measures}
+    statuses = ["ok"] * size
+    names = list(cols)
+    for j in np.flatnonzero(out["failed"]):
+        figs, statuses[j] = _point_figures(p, {n: float(cols[n][j]) for n in names})
+        for k in p.measures:
+            values[k][j] = figs[k]
+    return values, statuses
 
 
 @dataclasses.dataclass
@@ -311,12 +340,12 @@ class Result:
     task_seconds: list
     spread_s: float
 
-    def rows(self):
-        """One dict per point (C order): the varied names, the measures, status."""
-        flat = {k: v.ravel() for k, v in self.values.items()}
-        st = self.status.ravel()
-        for i in range(self.plan.size):
-            yield {**self.plan.point(i), **{k: float(flat[k][i]) for k in self.plan.measures}, "status": st[i]}
+    def columns(self):
+        """{name: list} over the points in C order: the varied names, the measures, status."""
+        cols = {name: c.tolist() for name, c in self.plan.columns(np.arange(self.plan.size)).items()}
+        cols.update({k: self.values[k].ravel().tolist() for k in self.plan.measures})
+        cols["status"] = self.status.ravel().tolist()
+        return cols
 
     def failures(self):
         """(how many points failed, the first failure's message or None)."""
@@ -459,20 +488,19 @@ def write(result, path):
     suffix = os.path.splitext(path)[1].lower()
     if suffix not in FORMATS:
         raise InputError(f"-o {quoted(path)}: the file must end in .csv or .parquet")
-    names = [a.name for a in result.plan.axes] + list(result.plan.measures) + ["status"]
+    cols = result.columns()
     if suffix == ".csv":
         with open(path, "w", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=names)
-            w.writeheader()
-            w.writerows(result.rows())
+            w = csv.writer(f)
+            w.writerow(cols)
+            w.writerows(zip(*cols.values()))
         return
     try:
         import pyarrow as pa
         import pyarrow.parquet as pq
     except ImportError:
         raise InputError("writing .parquet needs pyarrow: pip install pyarrow, or write .csv") from None
-    rows = list(result.rows())
-    table = pa.table({n: [r[n] for r in rows] for n in names})
+    table = pa.table(cols)
     meta = {"scene": result.plan.scene, "method": result.plan.method, "h": repr(result.plan.h),
             "T": repr(result.plan.T), "fixed": repr(dict(result.plan.values))}
     pq.write_table(table.replace_schema_metadata({f"cosymp.{k}": v for k, v in meta.items()}), path)

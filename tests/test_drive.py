@@ -1,5 +1,6 @@
 """The fused driver (cosymp.drive) against the diagnostics computed in NumPy from recorded runs
-(every step recorded, tangent maps formed in a second pass), on every scene x method."""
+(every step recorded, tangent maps formed in a second pass), on every scene x method: a run's
+maxima, long runs' envelopes, sweeps' batches and a comparison's per-record figures."""
 import math
 
 import numpy as np
@@ -19,6 +20,7 @@ from cosymp.integrate import Setup, simulate
 from cosymp.kernels.survey import _least, _most, defects, symplecticity
 from cosymp.methods import METHODS
 from cosymp.scenes import SCENES
+from cosymp.study import compare
 from cosymp.summary import long_drive, long_envelopes, run_summary
 
 PAIRS = [(s, m) for s in SCENES for m in METHODS if METHODS[m].refusal(SCENES[s]) is None and m != "exact"]
@@ -110,6 +112,34 @@ def test_envelopes_match_numpy_reductions(scene, method):
     for key in ("det", "symp"):
         np.testing.assert_allclose(bins[key], want[key], rtol=1e-8, atol=1e-13)
     np.testing.assert_allclose(Z, tr.z[-1], rtol=0, atol=1e-12 * np.max(np.abs(tr.z)))
+
+
+@pytest.mark.parametrize("scene,method", PAIRS)
+@pytest.mark.parametrize("stride", [1, 5])
+def test_comparison_figures_match_numpy_diagnostics(scene, method, stride):
+    """study.compare records its run and each record's figures in the fused loop (member steps);
+    the same run by simulate (an ensemble: on a linear scene it steps by the step matrix) with
+    tangent maps formed afterwards and the figures taken in NumPy gives them to round-off, at
+    every step and at a stride that does not divide the steps (the last record is the run's end)."""
+    s = Setup.make(scene, method)
+    h = s.scene.h
+    n = s.scene.ndof
+    c = compare(s, h, STEPS * h, stride=stride)
+    tr = simulate(s, h, STEPS * h, z0=nearby_states(s.start[0], 1e-4, 2 * n + 1), stride=stride, increments=True)
+    M = tangent_maps(tr)
+    run = c.run
+    assert run.stride == stride and run.steps == tr.steps == STEPS
+    np.testing.assert_array_equal(run.t, tr.t)
+    scale = np.max(np.abs(tr.z))
+    np.testing.assert_allclose(run.z, tr.z, rtol=0, atol=1e-12 * scale)
+    np.testing.assert_allclose(run.increments[1:], tr.increments[1:], rtol=0, atol=1e-12 * scale)
+    np.testing.assert_allclose(run.H_ext, tr.H_ext, rtol=0, atol=1e-12 * max(1.0, np.max(np.abs(tr.H))))
+    assert c.det_dev.shape == c.symp_dev.shape == c.paper_volume.shape == (len(tr.t) - 1,)
+    np.testing.assert_allclose(c.det_dev, det_deviation(M), rtol=1e-8, atol=1e-13)
+    np.testing.assert_allclose(c.symp_dev, symplecticity_defect(M), rtol=1e-8, atol=1e-13)
+    dZ = tr.increments[1:, 1:2 * n + 2]
+    hadamard = np.max(np.prod(np.sqrt(np.sum(dZ ** 2, axis=-1) + h * h), axis=-1))
+    np.testing.assert_allclose(c.paper_volume, paper_volume_form(tr), rtol=0, atol=1e-13 * hadamard)
 
 
 def test_chunks_keep_bins_and_sampled_maps_aligned(monkeypatch):

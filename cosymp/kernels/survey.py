@@ -11,8 +11,9 @@ otherwise, in the step's scaled coordinates as kernels.loops.tangent_matrix and 
 give it) feeds the running maxima of |det M_k - 1| and of the symplecticity defect, and the
 growth product; H + p_t of member 0 feeds its running maximum; with 2n + 2 members, members
 1..2n+1 give the paper's volume estimator det[X^1 ... X^(2n+1)] of their increments; and each of
-these is also reduced to per-bin minima and maxima over bins of `width` steps. No state is
-recorded: the members' states Z and p_t PT are advanced in place.
+these is also reduced to per-bin minima and maxima over bins of `width` steps. The members'
+states Z and p_t PT are advanced in place; a call may also record them at a stride, with the
+figures of each recorded state (a comparison's plots), and stores nothing else per step.
 
 Arguments of the loop (_fused): D, P, t0, h, Z, PT, nsteps as kernels.loops.propagate_members
 takes them; first: the steps are numbered from `first`, at times t0 + (first + k) h, and S, Cc:
@@ -24,9 +25,14 @@ the run's range needs the scene's scaled steps (scenes.base.Scene.needs_scaling)
 acc: running maxima (ACC_*), updated in place; env: (bins, len(ENV)) per-bin reductions of this
 call (bin b holds steps b*width .. (b+1)*width - 1; rows preset by the caller), tb (bins,) the
 time after each bin's first step; G: the growth product (m x m, or 0 x 0 for none) and gstate
-its (log scale, exponent, 1.0 while finite) as in diagnostics.MapGrowth. It returns
-(status, k, in_tangent): k steps completed, and whether a failure came from the tangent map's
-complex step.
+its (log scale, exponent, 1.0 while finite) as in diagnostics.MapGrowth; stride, Trec, Zrec,
+PTrec, dZrec: records as kernels.loops.propagate_members makes them (record j is this call's
+step j*stride, record 0 its start, the last its last step; none where Trec is empty), and F
+(records - 1, 3): per record j, |det M - 1| and ||M^T J M - J|| of the map of the step from
+record j (with every = stride, the steps mapped are the records'), and the paper's volume
+estimator of the step into record j + 1 (diagnostics.paper_volume_form's entry j), where F has
+rows. It returns (status, k, in_tangent): k steps completed, and whether a failure came from the
+tangent map's complex step.
 """
 import math
 
@@ -52,7 +58,7 @@ from .dispatch import (
     work,
 )
 from .families import OK, START
-from .loops import COMPLEX_STEP, _accept, _add, _coefs, _rescale, _scale, coef_at, energy_at
+from .loops import COMPLEX_STEP, _accept, _add, _coefs, _record_start, _rescale, _scale, coef_at, energy_at
 from .stack import _scene, coef_table, matrices, vectors
 
 ACC = ("H_ext_max_abs", "det_max_dev", "symp_max_dev", "symp_max_rel")
@@ -272,7 +278,7 @@ def _flush(env, tb, b, t, bin_):
 
 @njit(**INLINE)
 def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, env, tb, G,
-           gstate, scaled):
+           gstate, scaled, stride, Trec, Zrec, PTrec, dZrec, F):
     """Member steps, as kernels.loops.propagate_members takes them (so a run's states are those
     of `simulate`), and member 0's tangent map (_tangent) at the mapped steps. The figures are
     reduced in local variables and a stack copy of the growth product, written back once per
@@ -290,7 +296,11 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
     n = m // 2
     X = np.empty((m + 1, m + 1))
     volume = Z.shape[0] >= m + 2
-    none, flat = np.empty((0, 0, m)), np.empty((0, 0))  # no records
+    records = Trec.shape[0] > 0
+    figures = F.shape[0] > 0
+    if records:
+        _record_start(t0 + first * h, Z, PT, Trec, Zrec, PTrec, dZrec, m)
+    rec = 1
     u = len(D.offsets)
     can_reuse = u > 1 and D.offsets[0] == 0.0 and D.offsets[u - 1] == 1.0
     end = u - 1 if D.offsets[u - 1] == 1.0 else -1
@@ -322,6 +332,7 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
                 done, in_tangent = k, True
                 break
         t1 = t0 + (g + 1) * h
+        recording = records and ((k + 1) % stride == 0 or k + 1 == nsteps)
         for i in range(Z.shape[0]):
             for r in range(m):
                 old[r] = Z[i, r]
@@ -332,7 +343,7 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
                 hnew = _energy_after(P, C, end, Ce, t1 - tau, z)
             _rescale(z, n, e, up, down)
             sum_, comp = _add(S, Cc, i, dpt)
-            status = _accept(status, i, z, old, sum_ + comp, Z, PT, 0, False, none, flat, none, m)
+            status = _accept(status, i, z, old, sum_ + comp, Z, PT, rec, recording, Zrec, PTrec, dZrec, m)
             if status != OK:
                 break
             S[i], Cc[i] = sum_, comp
@@ -348,8 +359,16 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
         if mapped and want & WANT_MAPS:
             dev, symp, rel = defects(M, B, m)
             dmax, smax, rmax = _most(dmax, dev), _most(smax, symp), _most(rmax, rel)
+            if figures:
+                F[k // every, 0], F[k // every, 1] = dev, symp
         if mapped and growing:
             growing, gscale, gexp = grow(M, e, A, B, m, gscale, gexp)
+        vol = determinant(X, m + 1) if volume and (width > 0 or recording and figures) else math.nan
+        if recording:
+            Trec[rec] = t1
+            if figures:
+                F[rec - 1, 2] = vol
+            rec += 1
         if width > 0:
             if k % width == 0:
                 _flush(env, tb, b, tbin, bin_)
@@ -359,7 +378,6 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
             bin_[0] = _least(bin_[0], hext)
             bin_[1] = _most(bin_[1], hext)
             if volume:
-                vol = determinant(X, m + 1)
                 bin_[2] = _least(bin_[2], vol)
                 bin_[3] = _most(bin_[3], vol)
             if mapped:
@@ -392,18 +410,18 @@ def _with_values(P, row):
 
 @njit(**JIT)
 def survey(D, P, R, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, env, tb, G,
-           gstate, status, scaled, start):
+           gstate, status, scaled, start, stride, Trec, Zrec, PTrec, dZrec, F):
     """B = len(Z) runs of the fused loop for the scene (_fused) in one call, its arrays borrowed.
 
     Run b advances the members Z[b] (p_t PT[b], its compensated sum S[b] and compensation Cc[b])
     with the scene's parameters P, or R[b] where R has rows (a batch over parameter sets: one
     compiled call for a sweep's grid, no Python per point; scenes whose parameters are all
-    floats), and reduces into acc[b], G[b], gstate[b]; bins (env, tb) are run 0's (a batch asks
-    for none). With `start`, each run starts from its state at t0
+    floats), and reduces into acc[b], G[b], gstate[b]; bins (env, tb) and records (stride, Trec, Zrec,
+    PTrec, dZrec, F) are run 0's (a batch asks for none). With `start`, each run starts from its state at t0
     with p_t = -H (START where H is not finite there). status[b] = (status, steps completed, 1
     if the failure came from the tangent map's complex step)."""
-    D, P, R, Z, PT, S, Cc, acc, env, tb, G, gstate, status = borrow(
-        (D, P, R, Z, PT, S, Cc, acc, env, tb, G, gstate, status))
+    D, P, R, Z, PT, S, Cc, acc, env, tb, G, gstate, status, Trec, Zrec, PTrec, dZrec, F = borrow(
+        (D, P, R, Z, PT, S, Cc, acc, env, tb, G, gstate, status, Trec, Zrec, PTrec, dZrec, F))
     Ce = coef_table(D, P)
     zs = vectors(P, 1, 0.0)[0]
     for b in range(Z.shape[0]):
@@ -417,5 +435,6 @@ def survey(D, P, R, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc,
             PT[b, 0] = S[b, 0] = -H0
             Cc[b, 0] = 0.0
         st, k, tangent_failed = _fused(D, Pb, t0, first, h, Z[b], PT[b], S[b], Cc[b], nsteps,
-                                       every, want, width, acc[b], env, tb, G[b], gstate[b], scaled)
+                                       every, want, width, acc[b], env, tb, G[b], gstate[b], scaled, stride,
+                                       Trec, Zrec, PTrec, dZrec, F)
         status[b, 0], status[b, 1], status[b, 2] = st, k, tangent_failed
