@@ -1,6 +1,6 @@
 """Load: ten browser sessions move a slider while an eleventh runs a long run of 3e7 steps per method.
 
-`panel serve app` runs on a free 127.0.0.1 port with a small memory cap (COSYMP_MEMORY_CAP_MB=512),
+`panel serve app` runs on a free 127.0.0.1 port with a small memory cap (COSYMP_MEMORY_CAP_MB=448),
 a short unused-session lifetime (a closed tab's session is destroyed within seconds) and its
 /liveness endpoint. One headless Chromium holds 11 pages, each in its own browser context, driven
 through Playwright's async API (one event loop, the pages work at once):
@@ -23,13 +23,13 @@ through Playwright's async API (one event loop, the pages work at once):
    ArrowRight: +0.01, one recomputation), each move after the previous one settled, bounded by
    MOVE_TIMEOUT_MS per move and MOVES_WALL_S in all; page 0's progress is read every 2 s.
 5. Refusals, on page 1, while the long run holds its 32 MB lease: a 1.5e6-step comparison
-   (549 MB > the cap: "needs about ... COSYMP_MEMORY_CAP_MB") and a 4.5e5-step one (492 MB, under
-   the cap but over the about 475 MB the long run and the pages leave: "free while other runs hold
+   (458 MB > the cap: "needs about ... COSYMP_MEMORY_CAP_MB") and a 1.9e6-step one (429 MB, under
+   the cap but over the about 410 MB the long run and the pages leave: "free while other runs hold
    the rest"); the
    last good results must stay, RSS must not jump by anything like a refused request (less than
-   half the smaller one, 246 MB: the long run keeps growing beside them, and CI saw 103 MB once),
+   half the smaller one, 215 MB: the long run keeps growing beside them, and CI saw 103 MB once),
    and a good h then updates the plots.
-6. Clean-up: the long run is cancelled (its Cancel button); the 492 MB comparison refused in 5
+6. Clean-up: the long run is cancelled (its Cancel button); the 429 MB comparison refused in 5
    must now be computed (the cancelled run gave its lease back); all 11 contexts are closed and
    the server's log (PANEL_LOG_LEVEL=info: "Session <id> launching" / "destroyed") is read until
    every session is destroyed; then, every second for FREE_WAIT_S at most, the log is read until
@@ -55,10 +55,10 @@ fixed at 1 MiB, malloc_trim once a page's state is freed and after a long run or
 so RSS measures what is live rather than what the allocator keeps.
 
 Bounds, from runs on 2 shared cores (another suite's server and Chromium often running too):
-* Cap 512 MB, not 1 GB: the live views refuse more than 2e6 steps and cosymp records at most 2e7
-  values per run, so the largest comparison a page can ask for leases 549 MB (610 MB for the
-  charged particle): no single request can pass 1 GB. With 512 MB the long run (32 MB) and the
-  ten sessions (0.55 MB each) fit and both refusals can be asked for.
+* Cap 448 MB, not 1 GB: the live views refuse more than 2e6 steps and cosymp records at most 2e7
+  values per run, so the largest comparison a page can ask for leases 458 MB on the damped scene
+  (508 MB for the charged particle): no single request can pass 1 GB. With 448 MB the long run
+  (32 MB) and the ten sessions (0.55 MB each) fit and both refusals can be asked for.
 * p95 update latency < P95_BOUND_S = 40 s. One session alone: 0.25-0.6 s. Loaded, p95 was
   15-31 s (p50 4.6-9 s): every update costs the server ~1 s of its single event loop (rendering
   three plots), ten sessions and the long run queue there, and Chromium's 11 renderers take most
@@ -101,7 +101,7 @@ from served import ARTIFACTS, CHROMIUM, CHROMIUM_ARGS, START_TIMEOUT_S, TABLE_RO
 
 SERVER_LOG = ARTIFACTS / "load-server.log"
 
-CAP_MB = 512
+CAP_MB = 448
 SESSION_LIFETIME_MS = 5_000    # longer than a page takes from its HTML to its websocket here
 CHECK_UNUSED_MS = 500
 SLIDER_PAGES = 10
@@ -122,8 +122,8 @@ LONG_H = 0.005
 LONG_STALL_S = 60              # longest time the long run's progress (1% steps) may stand still
 AFTER_MARGIN_MB = 200
 REFUSAL_T = 300.0
-OVER_CAP_H = 0.0002            # 1.5e6 steps: 549 MB, over the cap
-OVER_FREE_H = 0.00067          # 4.5e5 steps: 492 MB, under the cap, over what the long run and the pages leave free
+OVER_CAP_H = 0.0002            # 1.5e6 steps: 458 MB, over the cap
+OVER_FREE_H = 0.00016          # 1.9e6 steps: 429 MB, under the cap, over what the long run and the pages leave free
 GOOD_H = 0.05
 EXECUTOR_THREADS = min(32, (os.cpu_count() or 1) + 4)
 # One thread beyond idle + the executor stayed after close in 2 of 6 runs (10 against 9; never
@@ -638,7 +638,7 @@ def load(server):
           f"({r['after_close']['pages_freed']} pages' state freed, {r['after_close']['waited_after_destroyed_s']} s "
           f"after the last session was destroyed; cap {CAP_MB} MB); "
           f"threads idle {r['idle']['threads']}, peak {r['peak']['threads']}, after close {r['after_close']['threads']}")
-    print(f"load: after the cancel the refused 492 MB comparison {r['after_cancel_request']}")
+    print(f"load: after the cancel the refused 429 MB comparison {r['after_cancel_request']}")
     print(f"load: refusals {r['refusal'].get('free_text')!r} / {r['refusal'].get('over_cap_text')!r}; "
           f"sessions {r['sessions']}, destroyed {r['destroyed_s']} s after close; total {r['total_s']} s")
     return r
