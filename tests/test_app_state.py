@@ -11,7 +11,7 @@ from urllib.parse import parse_qsl, urlsplit
 import numpy as np
 import pytest
 
-from app import jobs, memory, plotting, presets, study
+from app import jobs, memory, plotting, study
 from app.features import cloud, common, gauges, longrun, orbits, structure, theta
 from app.plotting import DENSE, POINTS, Raster
 from app.presets import PRESETS, URL_NAMES, parse_items, query_items
@@ -481,7 +481,7 @@ def test_the_long_runs_default_horizon_reaches_its_end_on_every_scene_at_its_def
     for name in SCENES:
         s = Study(scene=name)
         lr = longrun.LongRun(s)
-        assert lr.T_long == min(100 * s.T, presets.LONG_HORIZONS.get(name, np.inf))
+        assert lr.T_long == min(100 * s.T, SCENES[name].T_long or np.inf)
         if lr.T_long / s.h <= 2e5:
             lr.start()
             assert lr.status.startswith("done"), (name, lr.status)
