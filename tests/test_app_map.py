@@ -53,7 +53,7 @@ def test_every_scene_opens_on_a_map_that_computes(scene):
 
 def test_a_scene_without_a_map_entry_gets_h_against_its_first_parameter():
     scene = SCENES["kapitza"]
-    bare = dataclasses.replace(scene, name="bare")
+    bare = dataclasses.replace(scene, name="bare", map_axes=None)
     (xn, x0, x1, xl), (yn, y0, y1, yl) = maps.map_axes(bare)
     assert (xn, xl, yn, yl) == ("h", True, "w0", False) and x0 < scene.h < x1 and (y0, y1) == soft_range(scene.params[0])
 
