@@ -37,6 +37,7 @@ def test_each_scene_gets_its_default_axes_and_the_study_names_its_choices():
         if scene.map_axes is not None:
             assert maps.map_axes(scene) == scene.map_axes
         assert m.measure == maps.first_measure(scene) and m.measure in sweep.MEASURES
+    s.scene = "kapitza"
     s.method = "theta"
     assert m.param.x.objects[-1] == "theta" and (m.x, m.y) == ("nu", "a")
 

@@ -85,7 +85,7 @@ def test_every_method_has_a_declared_evaluation_count(scene):
 
 def test_the_bench_reads_which_scenes_and_families_its_c_mirror_has():
     mirror = bench.mirrored_scenes()
-    assert set(mirror) == set(SCENES)
+    assert {"decaying", "damped", "modulated", "charged", "kapitza"} <= set(mirror) <= set(SCENES)
     for scene, fields in mirror.items():
         P = SCENES[scene].pack(SCENES[scene].values())
         assert all(isinstance(getattr(P, f), float) for f in fields)
