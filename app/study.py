@@ -31,7 +31,7 @@ from cosymp.study import with_reference
 from .jobs import Job, Note
 from .plotting import equation, note, push
 from .presets import HARD, PAPER, PRESETS, URL_NAMES, rounded
-from .warmup import FIRST_VIEW
+from .warmup import first_view
 
 LIVE_MAX_STEPS = 2_000_000
 QUICK_S = 0.03  # a comparison expected to take at most this long is computed in the change's handler
@@ -177,6 +177,8 @@ def inputs_class(scene_name):
                                           doc=p.doc, label=p.name)
     return param.parameterized_class(f"{scene_name.title()}Inputs", params)
 
+
+FIRST_VIEW = first_view()
 
 class Study(Job):
     """Scene, methods and parameters of a comparison, and its results.

@@ -14,10 +14,16 @@ never compiles a kernel, so it stays at its warm size.
 """
 import time
 
-FIRST_VIEW = {"scene": "modulated", "method": "midpoint", "other": "rk4", "h": 0.2, "T": 2000.0,
-              "values": {"eps": 0.2, "alpha": 0.05}}
-"""What the app shows first (study.Study's defaults; presets.PRESETS[0]): RK4's |H + p_t| starts below
-the symplectic method's bounded band, drifts, and passes it. Its kernels are compiled first."""
+
+def first_view():
+    """What the app shows first (study.Study's defaults; presets.PRESETS[0]): the case a scene
+    declares as the lead (on the modulated oscillator, RK4's |H + p_t| starts below the symplectic
+    method's bounded band, drifts, and passes it). Its kernels are compiled first."""
+    from cosymp.scenes import lead
+
+    scene, case = lead()
+    return {"scene": scene.name, "method": case.method, "other": case.other, "h": case.h, "T": case.T,
+            "values": dict(case.values)}
 
 
 def first_keys():
@@ -28,8 +34,9 @@ def first_keys():
     from cosymp.integrate import Setup
     from cosymp.scenes import SCENES
 
-    scene = SCENES[FIRST_VIEW["scene"]]
-    methods = [FIRST_VIEW["method"]] + (["exact"] if scene.has_flow else []) + [FIRST_VIEW["other"]]
+    first = first_view()
+    scene = SCENES[first["scene"]]
+    methods = [first["method"]] + (["exact"] if scene.has_flow else []) + [first["other"]]
     return list(dict.fromkeys(warm.key_of(Setup.make(scene, m)) for m in methods))
 
 

@@ -1,8 +1,12 @@
 """`cosymp bench`: ns/step of the numba core next to the same algorithm in plain C -O3.
 
-The C reference (bench_ref.c) mirrors cosymp/kernels and the scenes formula for formula; it is
-compiled here with gcc once per scene, so the ratio numba/C measures the compiled code, not the
-algorithm. Both run the same scene, method, h, initial state and number of steps, recording
+The C reference (benchmarks/bench_ref.c, in cosymp's source checkout, not in the installed
+package) mirrors cosymp/kernels and a representative subset of scenes and families formula for
+formula; it is compiled here with gcc once per scene, so the ratio numba/C measures the compiled
+code, not the algorithm. Which scenes it mirrors, and the parameters it reads, are read from its
+source (its `#if SCENE == NAME` blocks and their Params structs); which families, from each
+family's registration (kernels.registry: `mirror`). The other pairs get numba figures only, and
+the table says which. Both run the same scene, method, h, initial state and number of steps, recording
 every step, interleaved, and their final states must agree. On linear scenes both sides step
 by the step's matrix (cosymp's ensemble path); `simulate` runs a single trajectory by member
 steps instead, which cost less (kernels.loops.propagate).
@@ -10,31 +14,21 @@ steps instead, which cost less (kernels.loops.propagate).
 import ctypes
 import json
 import math
+import re
 import shutil
 import subprocess
 import sys
 import tempfile
 import time
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
 from .errors import CosympError, InputError
 from .integrate import MAX_RECORDED, Setup, get_scene, initial_states
-from .kernels.families import (
-    NEWTON,
-    OK,
-    OVERFLOW,
-    SINGULAR,
-    Boris,
-    Composition,
-    Exact,
-    Explicit,
-    Gauss,
-    Theta,
-)
+from .kernels.families import NEWTON, OK, OVERFLOW, SINGULAR
 from .kernels.loops import energies, propagate_matrix, propagate_members
+from .kernels.registry import family
 from .methods import METHODS
 from .methods import method as get_method
 from .scenes import SCENES
@@ -47,8 +41,8 @@ MIN_REPEATS = 3
 AGREE = 1e-9
 NO_H = np.empty((0, 1))  # the loops' records of H: none
 STOPPED = {OVERFLOW: "overflow", NEWTON: "Newton did not converge", SINGULAR: "singular Newton matrix"}
-C_PARAMS = {"charged": ("m", "e", "B0", "eps", "w", "C00", "C01", "C11", "d")}
-"""Fields of a scene's parameter tuple the C reference reads, in its struct's order (default: all)."""
+C_SOURCE = Path(__file__).resolve().parent.parent / "benchmarks" / "bench_ref.c"
+_C_SCENE = re.compile(r"^#(?:el)?if SCENE == (\w+)\s*\ntypedef struct \{ double ([\w, ]+); \} Params;", re.MULTILINE)
 
 
 class _Loop(ctypes.Structure):
@@ -65,22 +59,11 @@ def _f64(values):
     return np.array(values, dtype=np.float64).ravel()
 
 
-def _family(D):
-    """The C entry point for family data D, and D as that entry point takes it after offsets; None
-    for a family bench_ref.c does not mirror (the splitting methods)."""
-    if isinstance(D, Explicit):
-        return "run_explicit", (_f64(D.A), _f64(D.b), np.array(D.stage, dtype=np.int64), len(D.b))
-    if isinstance(D, Gauss):
-        return "run_gauss", (_f64(D.A), _f64(D.b), len(D.b))
-    if isinstance(D, Theta):
-        return "run_theta", (float(D.wq0), float(D.wq1), float(D.wp0), float(D.wp1))
-    if isinstance(D, Composition):
-        return "run_composition", (_f64(D.gammas), len(D.gammas))
-    if isinstance(D, Boris):
-        return "run_boris", ()
-    if isinstance(D, Exact):
-        return "run_exact", ()
-    return None
+def mirrored_scenes(source=C_SOURCE):
+    """{scene name: the fields of its parameter tuple the C mirror reads, in its struct's order}
+    for every scene the C source mirrors."""
+    return {name.lower(): tuple(f.strip() for f in fields.split(","))
+            for name, fields in _C_SCENE.findall(Path(source).read_text())}
 
 
 def _c_arg(v):
@@ -97,10 +80,8 @@ def _compile(scene, workdir):
     k = scene.kernel
     lib = Path(workdir) / f"bench_{scene.name}.so"
     macros = {"SCENE": scene.name.upper(), "NDOF": k.ndof, "NCOEF": k.ncoef, "LINEAR": int(k.linear)}
-    with resources.as_file(resources.files("cosymp").joinpath("bench_ref.c")) as path:
-        cmd = [CC, *CFLAGS, *(f"-D{key}={v}" for key, v in macros.items()), "-o", str(lib), str(path),
-               "-lm"]
-        res = subprocess.run(cmd, capture_output=True, text=True, check=False)
+    cmd = [CC, *CFLAGS, *(f"-D{key}={v}" for key, v in macros.items()), "-o", str(lib), str(C_SOURCE), "-lm"]
+    res = subprocess.run(cmd, capture_output=True, text=True, check=False)
     if res.returncode != 0:
         raise CosympError(f"compiling the C reference for '{scene.name}' failed: "
                           f"{' '.join(res.stderr.strip().splitlines()[-1:])}")
@@ -136,7 +117,7 @@ class _Numba(_Runner):
         self.setup, self.h = setup, h
         # bench_ref.c's algorithm: the step matrix on linear scenes, whatever the ensemble size (a
         # family without a mirror is timed as a single trajectory runs: member by member)
-        mirrored = _family(setup.data) is not None
+        mirrored = family(setup.data).mirror(setup.data) is not None
         self.kernel = propagate_matrix if setup.scene.kernel.linear and mirrored else propagate_members
 
     def _run(self):
@@ -145,10 +126,9 @@ class _Numba(_Runner):
 
 
 class _C(_Runner):
-    def __init__(self, lib, setup, h, z0, pt0, nsteps):
+    def __init__(self, lib, fields, setup, h, z0, pt0, nsteps):
         super().__init__(z0, pt0, nsteps)
-        name, data = _family(setup.data)
-        fields = C_PARAMS.get(setup.scene.name, setup.P._fields)
+        name, data = family(setup.data).mirror(setup.data)
         values = (_f64([getattr(setup.P, f) for f in fields]), _f64(setup.data.offsets))
         values += (len(values[1]), *data)
         N, m = z0.shape
@@ -174,19 +154,20 @@ def _pairs(args):
     return pairs
 
 
-def _measure(setup, nsteps, lib):
+def _measure(setup, nsteps, lib, fields):
     """One row: ns/step of numba and C (min over interleaved repeats) and their agreement.
 
-    lib: None, or the C reference built for the setup's scene.
+    lib: None, or the C reference built for the setup's scene; fields: the parameters the C
+    mirror reads, None where it does not mirror the scene.
     """
     h = float(setup.scene.h)
     z0 = initial_states(setup)
     H0 = np.empty((1, z0.shape[0]))
     energies(setup.P, np.zeros(1), z0[None], H0)
     runners = [_Numba(setup, h, z0, -H0[0], nsteps)]
-    mirrored = _family(setup.data) is not None
-    if lib is not None and mirrored:
-        runners.append(_C(lib, setup, h, z0, -H0[0], nsteps))
+    mirrored = fields is not None and family(setup.data).mirror(setup.data) is not None
+    if mirrored and lib is not None:
+        runners.append(_C(lib, fields, setup, h, z0, -H0[0], nsteps))
     for r in runners:
         r.timed()
     best = [math.inf] * len(runners)
@@ -225,9 +206,13 @@ def _table(rows, out):
             note.append(f"WARNING: C and numba differ (rel {r['rel_diff']:.1e})")
         out.write(f"{r['scene']:<10} {r['method']:<17} {r['steps']:>8} {r['numba_ns']:>14.1f} {c:>10} "
                   f"{ratio:>6}  {'; '.join(note)}".rstrip() + "\n")
-    unmirrored = sorted({r["method"] for r in rows if not r["mirrored"]})
+    unmirrored = {}
+    for r in rows:
+        if not r["mirrored"]:
+            unmirrored.setdefault(r["scene"], []).append(r["method"])
     if unmirrored:
-        out.write(f"no C mirror in bench_ref.c (numba figures only): {', '.join(unmirrored)}\n")
+        pairs = "; ".join(f"{scene}: {', '.join(methods)}" for scene, methods in unmirrored.items())
+        out.write(f"no C mirror in bench_ref.c (numba figures only) for {pairs}\n")
     rated = [r for r in rows if r["ratio"] is not None]
     if rated:
         worst = max(rated, key=lambda r: r["ratio"])
@@ -245,19 +230,25 @@ def bench(args, out):
     if (args.steps + 1) * widest > MAX_RECORDED:
         raise InputError(f"--steps {args.steps} records more than {MAX_RECORDED:.0e} values: "
                          f"pass at most {MAX_RECORDED // widest - 1}")
-    have_cc = shutil.which(CC) is not None
-    if not have_cc:
-        (sys.stderr if args.json else out).write(
-            f"{CC} not found: numba figures only, no C reference or ratio\n")
+    say = (sys.stderr if args.json else out).write
+    have_source = C_SOURCE.is_file()
+    have_cc = have_source and shutil.which(CC) is not None
+    if not have_source:
+        say(f"the C reference {C_SOURCE.parent.name}/{C_SOURCE.name} is not in this installation (it is in "
+            "cosymp's source checkout: run the bench from there): numba figures only, no C reference or ratio\n")
+    elif not have_cc:
+        say(f"{CC} not found: numba figures only, no C reference or ratio\n")
     elif not args.json:
         out.write(f"C reference: {CC} {' '.join(CFLAGS)}; numba/C ratio target <= {TARGET}\n")
+    mirror = mirrored_scenes() if have_source else {}
     rows = []
     with tempfile.TemporaryDirectory(prefix="cosymp-bench-") as workdir:
         libs = {}
         for scene, method in pairs:
-            if have_cc and scene.name not in libs:
+            fields = mirror.get(scene.name)
+            if have_cc and fields is not None and scene.name not in libs:
                 libs[scene.name] = _compile(scene, workdir)
-            rows.append(_measure(Setup.make(scene, method), args.steps, libs.get(scene.name)))
+            rows.append(_measure(Setup.make(scene, method), args.steps, libs.get(scene.name), fields))
     if args.json:
         out.write(json.dumps(rows) + "\n")
     else:

@@ -45,7 +45,7 @@ def parser():
     r.add_argument("--h", type=_number, help="step size (default: the scene's paper value)")
     r.add_argument("--T", type=_number, help="horizon (default: the scene's paper value)")
     r.add_argument("--theta", type=_number, help="theta in [0, 1] for theta and theta-naive")
-    r.add_argument("--gauge", help="gauge of the charged scene (default original)")
+    r.add_argument("--gauge", help="gauge of a scene with gauges (default original)")
     r.add_argument("--transport-from", help="run in this gauge and transport each step into --gauge")
     r.add_argument("--set", type=_assignment, action="append", default=[], metavar="NAME=VALUE",
                    help="a scene parameter, e.g. --set gamma=0.5 or --set 'beta=0.05*(1+tanh(t))'")
@@ -114,14 +114,16 @@ def parser():
 
 def _run(args, out):
     from .integrate import Setup, get_scene
+    from .scenes import SCENES
     from .summary import run_summary
 
     scene = get_scene(args.scene)
     values = dict(args.set)
     if args.gauge is not None or args.transport_from is not None:
-        if scene.name != "charged":
+        if not scene.has_gauges:
+            gauged = ", ".join(f"'{s.name}'" for s in SCENES.values() if s.has_gauges)
             raise InputError(f"scene '{scene.name}' has no gauges: --gauge and --transport-from "
-                             f"apply to 'charged'")
+                             f"apply to {gauged}")
         for g in (args.gauge, args.transport_from):
             if g is not None:
                 scene.values({"gauge": g})

@@ -113,12 +113,8 @@ class Trajectory:
 
     @property
     def Pi(self):
-        """Mechanical momentum p - e A(q, t) (K, N, 2) for the charged scene, else None."""
-        if self.setup.scene.name != "charged":
-            return None
-        from .scenes.charged import mechanical
-
-        return mechanical(self.setup.P, self.t, self.q, self.p)
+        """Mechanical momentum (K, N, n) where the scene defines one (Scene.momentum), else None."""
+        return self.setup.scene.momentum(self.setup.P, self.t, self.q, self.p)
 
 
 def initial_states(setup, z0=None):

@@ -11,6 +11,7 @@ import numpy as np
 
 from .errors import InputError, as_number, quoted
 from .kernels.families import Boris, Composition, Exact, Explicit, Gauss, Splitting, Theta
+from .kernels.registry import FAMILIES
 from .kernels.stack import MAX_OFFSETS, MAX_STAGES
 
 
@@ -75,12 +76,42 @@ def _splitting(a, b):
     return Splitting(_floats(a), _floats(b), kick.astype(np.int64), _floats(offsets))
 
 
-def _leapfrogs(gammas):
-    """Symmetric drift-kick-drift leapfrog sub-steps of sizes gammas[i] h, their half drifts merged:
-    one kick per sub-step."""
-    g = np.asarray(gammas, float)
-    a = 0.5 * (g + np.append(g[1:], 0.0))
-    return _splitting(np.concatenate(([0.5 * g[0]], a)), np.concatenate(([0.0], g)))
+LEAPFROG = ((0.5, 0.5), (0.0, 1.0))
+"""Störmer-Verlet as splitting coefficients (drifts a, kicks b): half drift, kick, half drift."""
+
+
+def _flows(a, b):
+    """The sequence of a splitting's flows, ('kick' or 'drift', coefficient), empty ones left out."""
+    return [f for i in range(len(a)) for f in (("kick", b[i]), ("drift", a[i])) if f[1] != 0.0]
+
+
+def compose(base, gammas):
+    """The symmetric composition of a symmetric base step: sub-steps of sizes gammas[i] h (the
+    gammas sum to 1 and read the same backwards), as data of the base's family.
+
+    base: the midpoint rule's data (Theta at 1/2), giving a Composition of midpoint sub-steps; or
+    a symmetric splitting's coefficients (drifts a, kicks b), giving Splitting data in which a
+    sub-step that starts with a drift has it merged into the previous sub-step's last drift."""
+    gammas = np.asarray(gammas, float)
+    assert np.allclose(gammas, gammas[::-1], rtol=0.0, atol=1e-15), "compositions need symmetric coefficients"
+    if isinstance(base, Theta):
+        assert base.wq0 == base.wq1 == base.wp0 == base.wp1 == 0.5, "compose the midpoint rule (theta 1/2)"
+        data = _composition(gammas)
+    else:
+        a, b = (np.asarray(x, float) for x in base)
+        flows = _flows(a, b)
+        assert flows == flows[::-1], "compose a symmetric splitting (its flows read the same backwards)"
+        drifts, kicks = [], []
+        for g in gammas:
+            for i in range(len(a)):
+                if kicks and b[i] == 0.0:
+                    drifts[-1] += g * a[i]
+                else:
+                    drifts.append(g * a[i])
+                    kicks.append(g * b[i])
+        data = _splitting(drifts, kicks)
+    assert len(data.offsets) <= MAX_OFFSETS, "raise kernels.stack's bounds"
+    return data
 
 
 # Blanes & Moan, J. Comput. Appl. Math. 142 (2002) 313-330, Table 3: symmetric symplectic
@@ -199,6 +230,7 @@ def _data(name, theta):
     m = METHODS[name]
     data = m.build(theta) if m.takes_theta else m.build()
     stages = len(getattr(data, "b", ()))
+    assert type(data) in FAMILIES, f"register the family of {name} in kernels.registry"
     assert len(data.offsets) <= MAX_OFFSETS and stages <= MAX_STAGES, "raise kernels.stack's bounds"
     return data
 
@@ -227,20 +259,20 @@ METHODS = {m.name: m for m in (
     Method("gauss6", "Gauss-Legendre 6", "3-stage Gauss-Legendre collocation, order 6, symplectic; three "
            "stages per step where the order-6 composition takes nine midpoint steps", 6, "symplectic", _gauss6),
     Method("composition4", "Midpoint triple jump (order 4)", "symmetric composition of 3 midpoint "
-           "steps (Yoshida's triple jump)", 4, "symplectic", lambda: _composition(_TJ4)),
+           "steps (Yoshida's triple jump)", 4, "symplectic", lambda: compose(_lifted(0.5), _TJ4)),
     Method("composition6", "Midpoint composition (order 6)", "the triple jump applied to the order-4 "
            "composition: 9 midpoint steps", 6, "symplectic",
-           lambda: _composition(_triple_jump(_TJ4, 4))),
+           lambda: compose(_lifted(0.5), _triple_jump(_TJ4, 4))),
     Method("boris", "Boris push", "the standard charged-particle pusher (drift-kick-drift, fields at "
            "the half step); volume-preserving, gauge-independent", 2, "volume",
            lambda: Boris(_floats([0.0, 0.5, 1.0])), requires="fields"),
     Method("leapfrog", "Störmer-Verlet leapfrog", "explicit splitting of a separable H: half drift (T and "
            "t), kick (V), half drift; symplectic on the extended phase space, one force per step", 2,
-           "symplectic", lambda: _leapfrogs([1.0]), requires="separable"),
+           "symplectic", lambda: compose(LEAPFROG, [1.0]), requires="separable"),
     Method("yoshida4", "Yoshida 4 (leapfrog triple jump)", "Yoshida's triple jump of the leapfrog: 3 "
-           "forces per step", 4, "symplectic", lambda: _leapfrogs(_TJ4), requires="separable"),
+           "forces per step", 4, "symplectic", lambda: compose(LEAPFROG, _TJ4), requires="separable"),
     Method("yoshida6", "Yoshida 6 (triple jump of Yoshida 4)", "the triple jump applied to Yoshida 4: "
-           "9 forces per step", 6, "symplectic", lambda: _leapfrogs(_triple_jump(_TJ4, 4)),
+           "9 forces per step", 6, "symplectic", lambda: compose(LEAPFROG, _triple_jump(_TJ4, 4)),
            requires="separable"),
     Method("blanes-moan4", "Blanes-Moan SRKN 4", "Blanes & Moan's optimised order-4 Runge-Kutta-Nystrom "
            "splitting (2002, SRKN6b): 7 forces per step here (the last and the next step's first are not "

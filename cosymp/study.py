@@ -25,7 +25,6 @@ from .diagnostics import (
 from .drive import Drive
 from .errors import InputError, RunError
 from .integrate import Setup, check_step, default_stride, initial_states, simulate
-from .scenes import charged
 from .summary import transport
 
 
@@ -40,7 +39,7 @@ class Comparison:
     cloud, cloud_area: the carried loop and its enclosed area over its initial area.
     error: the relative error |z - z_ref| / |z_ref| against the exact flow where the scene has one,
         or against a reference run given to `with_reference`; else None. against: which of them.
-    Pi: mechanical momentum of the trajectory (charged scene), else None.
+    Pi: mechanical momentum of the trajectory where the scene defines one, else None.
     """
 
     setup: Setup
@@ -108,9 +107,7 @@ def compare(setup, h, T, delta=1e-4, cloud_points=0, cloud_radius=0.05, stride=N
                          stride=run.stride)
         z_exact = exact.z[: len(run.t), 0]
         error = distance(run.z[:, 0], z_exact) / np.maximum(norm(z_exact), np.finfo(float).tiny)
-    Pi = None
-    if setup.scene.name == "charged":
-        Pi = charged.mechanical(setup.P, run.t, run.q[:, 0], run.p[:, 0])
+    Pi = setup.scene.momentum(setup.P, run.t, run.q[:, 0], run.p[:, 0])
     return Comparison(setup, run, figures[:, 0], figures[:, 1], paper_symplectic_form(run),
                       figures[:, 2], separation_omega(run) / delta ** 2, cloud, area, error, Pi,
                       time.perf_counter() - start, "the exact flow" if error is not None else None)
@@ -144,16 +141,16 @@ def compare_until_failure(setup, h, T, **options):
     return None, message
 
 
-def gauge_study(method, values, h, T, theta=None):
-    """The charged particle in all five gauges: per-gauge runs (the method applied in each gauge)
-    and transported runs (the original-gauge run mapped by G_chi), with q, p and Pi each."""
+def gauge_study(scene, method, values, h, T, theta=None):
+    """A scene with gauges (Scene.gauges) in each of them: per-gauge runs (the method applied in
+    each gauge) and transported runs (the original-gauge run mapped by G_chi), with q, p and Pi each."""
     out = {}
-    base = Setup.make("charged", method, {**values, "gauge": "original"}, theta)
+    base = Setup.make(scene, method, {**values, "gauge": "original"}, theta)
     source = simulate(base, h, T)
-    for g in charged.GAUGES:
+    for g in base.scene.gauges:
         s = base.with_values(gauge=g)
         naive = simulate(s, h, T)
         moved = transport(source, s)
-        out[g] = {kind: (r.t, r.q[:, 0], r.p[:, 0], charged.mechanical(s.P, r.t, r.q[:, 0], r.p[:, 0]))
+        out[g] = {kind: (r.t, r.q[:, 0], r.p[:, 0], s.scene.momentum(s.P, r.t, r.q[:, 0], r.p[:, 0]))
                   for kind, r in (("per-gauge", naive), ("transported", moved))}
     return out

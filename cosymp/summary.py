@@ -7,23 +7,23 @@ import numpy as np
 
 from .diagnostics import det_deviation, distance, nearby_states, norm, symplecticity_defect, tangent_maps
 from .drive import CHUNK, Drive
-from .integrate import Setup, check_step, simulate
+from .integrate import check_step, simulate
 from .kernels.loops import energies
 from .kernels.survey import ACC, ENV
 from .reference import reference_final
-from .scenes import charged
 
 
 def transport(traj, target):
-    """Map a charged-scene trajectory into the gauge of setup `target` by G_chi at each time.
+    """Map a trajectory of a scene with gauges into the gauge of setup `target` by G_chi at each time.
 
     G_(t_(k+1)) o Phi o G_(t_k)^-1 telescopes, so the transported run is G applied to every
     state of the run in the source gauge; H is re-evaluated in the target gauge.
     """
     src = traj.setup
     t = traj.t
-    q, p, pt = charged.gauge_map(src.P, t, traj.q, traj.p, traj.pt, inverse=True)
-    q, p, pt = charged.gauge_map(target.P, t, q, p, pt)
+    gauge_map = src.scene.gauge_map
+    q, p, pt = gauge_map(src.P, t, traj.q, traj.p, traj.pt, inverse=True)
+    q, p, pt = gauge_map(target.P, t, q, p, pt)
     z = np.ascontiguousarray(np.concatenate([q, p], axis=-1))
     H = np.empty(pt.shape)
     energies(target.P, np.ascontiguousarray(t), z, H)
@@ -31,18 +31,10 @@ def transport(traj, target):
 
 
 def transported_maps(M, src, target, t, h):
-    """Tangent maps of the transported step: DG(t + h) M DG(t)^-1, DG = [[I, 0], [e beta dC, I]]."""
-    beta = charged.betas(src.P, t)[0]
-    beta1 = charged.betas(src.P, t + h)[0]
-    dC = charged.gauge_matrix(target.P) - charged.gauge_matrix(src.P)
-    e = src.P.e
-
-    def DG(b, sign):
-        G = np.tile(np.eye(4), (len(b), 1, 1))
-        G[:, 2:, :2] = sign * e * b[:, None, None] * dC
-        return G
-
-    return DG(beta1, 1.0) @ M @ DG(beta, -1.0)
+    """Tangent maps of the transported step: DG(t + h) M DG(t)^-1, DG the Jacobian of the change
+    of gauge (Scene.gauge_jacobian)."""
+    jacobian = src.scene.gauge_jacobian
+    return jacobian(src.P, target.P, t + h) @ M @ jacobian(target.P, src.P, t)
 
 
 def _transported_run(setup, h, steps, source, progress):
@@ -108,8 +100,8 @@ def run_summary(setup, h, T, transport_from=None, with_error=True, progress=None
         "reference": None,
         "wall_s": wall,
     }
-    if setup.scene.name == "charged":
-        Pi = charged.mechanical(setup.P, np.array([t]), z[None, :n], z[None, n:])
+    Pi = setup.scene.momentum(setup.P, np.array([t]), z[None, :n], z[None, n:])
+    if Pi is not None:
         out["Pi_final"] = Pi[0].tolist()
     if with_error:
         zr, spread = reference_final(setup, h, T)
@@ -138,14 +130,3 @@ def long_envelopes(setup, h, T, bins, delta=1e-4, progress=None):
     out = drive.run(steps, progress, strict=False)
     return out or {k: np.empty(0) for k in ("t",) + ENV}, drive.failure
 
-
-def paper_volume_run(h=0.1, T=5e5, gamma=2e-4, methods=("midpoint", "rk4"), delta=1e-4):
-    """The paper's longest run: damped, each method with the 3 extra trajectories of its
-    volume form, advanced together; returns the wall time per method."""
-    walls = {}
-    for name in methods:
-        s = Setup.make("damped", name, {"gamma": gamma})
-        z0 = nearby_states(np.array([s.values["q0"], s.values["p0"]]), delta, 3)
-        tr = simulate(s, h, T, z0=z0, stride=1000, increments=True)
-        walls[name] = tr.wall_s
-    return walls

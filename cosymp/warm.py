@@ -93,7 +93,7 @@ def _exercise(setup):
     if batchable(setup):
         batch_runs(setup, h, 4, [tuple(setup.P)], setup.start, growth=True)
     scipy_reference(setup, 2 * h)
-    if "gauge" in setup.values:
+    if setup.scene.has_gauges:
         transport(single, setup)
 
 

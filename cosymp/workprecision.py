@@ -33,8 +33,8 @@ from .diagnostics import relative_error
 from .drive import CHUNK, Drive, map_every
 from .errors import InputError, RunError
 from .integrate import MAX_STEPS, Setup, check_step, get_scene, simulate
-from .kernels.families import Composition, Exact, Explicit, Gauss, Splitting
 from .kernels.loops import energies
+from .kernels.registry import family
 from .methods import METHODS
 from .methods import method as get_method
 from .reference import scipy_reference
@@ -86,19 +86,9 @@ def solver_name(setup):
 
 
 def rhs_per_step(setup):
-    """Vector-field evaluations per step (see the module's definitions), NaN if run-dependent."""
-    D = setup.data
-    if isinstance(D, Explicit):
-        return float(len(D.b))
-    if isinstance(D, Splitting):  # one force (the gradient of V) per kick
-        return float(np.count_nonzero(D.b))
-    if isinstance(D, Exact) or not setup.scene.kernel.linear:
-        return math.nan
-    if isinstance(D, Composition):
-        return float(len(D.gammas))
-    if isinstance(D, Gauss):
-        return float(len(D.b))
-    return 1.0
+    """Vector-field evaluations per step (see the module's definitions), NaN if run-dependent:
+    as the method's family declares it (kernels.registry)."""
+    return family(setup.data).evaluations(setup.data, setup.scene.kernel.linear)
 
 
 def timed(call, budget):

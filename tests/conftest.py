@@ -1,6 +1,7 @@
 """Shared lists: every scene x method pair the tests iterate, built from the registries.
 
-A new scene or method is tested by being added to its registry. On a cold numba cache every
+A new scene is tested by adding its module to cosymp/scenes/, a new method by adding it to the
+method registry (cosymp.methods.METHODS). On a cold numba cache every
 kernel is compiled first, in one process per core (cosymp.warm), instead of test by test.
 """
 import numpy as np

@@ -8,7 +8,7 @@ import pytest
 
 from app import memory
 from app.features import stabilitymap as maps
-from app.features.stabilitymap import MAP_AXES, StabilityMap
+from app.features.stabilitymap import StabilityMap
 from app.study import Study, soft_range
 from cosymp import sweep
 from cosymp import workprecision as wp
@@ -34,9 +34,10 @@ def test_each_scene_gets_its_default_axes_and_the_study_names_its_choices():
         numeric = [p.name for p in s.scene_obj.params if not p.choices and not isinstance(p.default, str)]
         assert m.param.x.objects == numeric + ["h", "T"]
         assert xn != yn and {xn, yn} <= set(numeric + ["h", "T"]) and x0 < x1 and y0 < y1
-        if scene.name in MAP_AXES:
-            assert maps.map_axes(scene) == MAP_AXES[scene.name][:2]
+        if scene.map_axes is not None:
+            assert maps.map_axes(scene) == scene.map_axes
         assert m.measure == maps.first_measure(scene) and m.measure in sweep.MEASURES
+    s.scene = "kapitza"
     s.method = "theta"
     assert m.param.x.objects[-1] == "theta" and (m.x, m.y) == ("nu", "a")
 
@@ -53,7 +54,7 @@ def test_every_scene_opens_on_a_map_that_computes(scene):
 
 def test_a_scene_without_a_map_entry_gets_h_against_its_first_parameter():
     scene = SCENES["kapitza"]
-    bare = dataclasses.replace(scene, name="bare")
+    bare = dataclasses.replace(scene, name="bare", map_axes=None)
     (xn, x0, x1, xl), (yn, y0, y1, yl) = maps.map_axes(bare)
     assert (xn, xl, yn, yl) == ("h", True, "w0", False) and x0 < scene.h < x1 and (y0, y1) == soft_range(scene.params[0])
 

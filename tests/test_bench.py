@@ -56,3 +56,18 @@ def test_bench_bad_input_exits_2(argv):
     err = StringIO()
     assert main(["bench", *argv], out=StringIO(), err=err) == 2
     assert err.getvalue().startswith("cosymp: ")
+
+
+def test_bench_names_the_pairs_its_c_mirror_lacks(monkeypatch):
+    monkeypatch.setattr(bench, "CC", "cosymp-no-such-compiler")
+    out = StringIO()
+    assert main(["bench", "--steps", "100", "--scenes", "modulated", "--methods", "midpoint", "leapfrog"], out=out) == 0
+    assert out.getvalue().splitlines()[-1] == "no C mirror in bench_ref.c (numba figures only) for modulated: leapfrog"
+
+
+def test_bench_without_the_c_source_says_where_it_is(monkeypatch, tmp_path, capsys):
+    """An installed package has no benchmarks/: the bench gives numba figures and says why."""
+    monkeypatch.setattr(bench, "C_SOURCE", tmp_path / "benchmarks" / "bench_ref.c")
+    rows = _rows(["bench", "--steps", "100", "--scenes", "decaying", "--methods", "euler", "--json"])
+    assert "benchmarks/bench_ref.c is not in this installation" in capsys.readouterr().err
+    assert rows[0]["c_ns"] is None and rows[0]["numba_ns"] > 0 and rows[0]["mirrored"] is False

@@ -13,7 +13,9 @@ from conftest import setup
 from cosymp.errors import RunError
 from cosymp.integrate import simulate
 from cosymp.kernels.loops import vector_field
+from cosymp.methods import METHODS
 from cosymp.reference import scipy_reference
+from cosymp.scenes import SCENES
 
 # ------------------------------------------------------------------ explicit stability limits
 # The modulated scene at eps = 0 is the oscillator q'' = -q (H = (q^2 + p^2)/2). A one-step method
@@ -63,7 +65,13 @@ def test_explicit_euler_grows_at_every_step_size(h):
     assert ratio == pytest.approx((1 + h * h) ** 50, rel=1e-11) and ratio > 1
 
 
-@pytest.mark.parametrize("method", ["midpoint", "gauss4", "gauss6", "composition4"])
+# Every implicit symmetric symplectic method of the registry (midpoint, the theta methods at 1/2,
+# Gauss-Legendre, midpoint compositions): on q'' = -q each is a rotation at any step.
+ROTATIONS = [m.name for m in METHODS.values()
+             if m.preserves == "symplectic" and not m.requires and m.order_at(0.5) % 2 == 0]
+
+
+@pytest.mark.parametrize("method", ROTATIONS)
 @pytest.mark.parametrize("h", [2.9, 10.0, 100.0])
 def test_implicit_methods_stay_on_the_circle_at_any_step(method, h):
     """The Cayley-type maps are rotations: |z| is kept to round-off far beyond RK4's limit."""
@@ -86,7 +94,10 @@ def test_symplectic_euler_is_bounded_below_h_2_and_grows_above():
 # with Floquet exponent eps/4 to first order (Landau-Lifshitz, Mechanics, sec. 27); at
 # alpha = 2.5 with eps = 0.2 it stays bounded.
 
-METHODS_FLOQUET = ["midpoint", "symplectic-euler", "gauss4", "gauss6", "composition4", "rk4", "rk8"]
+# Every method of the registry that applies to the scene, but explicit Euler (its false growth has
+# its own test below); the theta methods at their default 1/2.
+METHODS_FLOQUET = [m.name for m in METHODS.values()
+                   if m.refusal(SCENES["modulated"]) is None and m.name != "euler"]
 
 
 def monodromy(method, eps, alpha, per_period):

@@ -12,7 +12,6 @@ from cosymp.integrate import Setup
 from cosymp.methods import METHODS
 from cosymp.report.style import GAUGE_COLORS
 from cosymp.scenes import SCENES
-from cosymp.scenes.charged import GAUGES
 from cosymp.study import gauge_study
 
 from ..jobs import Note
@@ -27,8 +26,9 @@ QUANTITIES = {"orbit": ("orbit (x, y)", "x", "y"), "p": ("canonical p_x (gauge-d
               "diff": ("|q − q_orig| + |Π − Π_orig|, max per bin", "t", "difference")}
 
 
-def has_gauges(scene):
-    return any(p.name == "gauge" for p in scene.params)
+def gauged_scene():
+    """The scene this tab studies: the first with gauges (Scene.gauges)."""
+    return next(s for s in SCENES.values() if s.has_gauges)
 
 
 class GaugeStudy(Follower):
@@ -43,7 +43,7 @@ class GaugeStudy(Follower):
     method = param.String(default="", doc="The method of the results.")
 
     def applies(self):
-        return has_gauges(self.study.scene_obj)
+        return self.study.scene_obj.has_gauges
 
     def _inputs(self):
         s = self.study
@@ -58,9 +58,9 @@ class GaugeStudy(Follower):
         return comparison_bytes([inputs[5]], inputs[2], inputs[3])
 
     def _compute(self, inputs, run):
-        method, values, h, T, theta, _ = inputs
+        method, values, h, T, theta, setup = inputs
         try:
-            return METHODS[method].label(theta), gauge_study(method, values, h, T, theta), ""
+            return METHODS[method].label(theta), gauge_study(setup.scene, method, values, h, T, theta), ""
         except RunError as err:
             return METHODS[method].label(theta), None, str(err)
 
@@ -79,7 +79,7 @@ class GaugeStudy(Follower):
 def gauge_series(data, kind, quantity):
     """{gauge: (x, y)} of one quantity of every gauge's run (the difference: not the original's)."""
     out = {}
-    for g in GAUGES:
+    for g in data:
         if quantity == "diff" and g == "original":
             continue
         t, q, p, Pi = data[g][kind]
@@ -98,7 +98,7 @@ def gauge_series(data, kind, quantity):
 def floor_text(largest):
     """What the difference plots show: their largest values, and the gauges whose difference is
     exactly 0 (drawn at the log axis' floor)."""
-    same = [name for name, x in GAUGES.items() if name != "original" and not np.any(x.C)]
+    same = [name for name, x in gauged_scene().gauges.items() if name != "original" and not np.any(x.C)]
     text = (f"Largest difference from the original gauge: {largest.get('per-gauge', 0.0):.1e} per gauge (the "
             f"method's error differs between gauges), {largest.get('transported', 0.0):.1e} transported (round-off:"
             " G_χ maps the run exactly).")
@@ -113,13 +113,14 @@ class GaugeView(FeatureView):
 
     def layout(self):
         g = self.state
+        gauges = gauged_scene().gauges
         self.sources = {}
         columns = []
         for kind, heading, text in KINDS:
             figs = []
             for quantity, (title, xl, yl) in QUANTITIES.items():
                 fig = figure(title, xl, yl, logy=quantity == "diff")
-                for name in GAUGES:
+                for name in gauges:
                     if quantity == "diff" and name == "original":
                         continue
                     src = self.sources[kind, quantity, name] = source()
@@ -134,14 +135,13 @@ class GaugeView(FeatureView):
                        note(f"<span class='doc'>condition: {html.escape(x.condition)}</span>"
                             + (f"<br><span class='caveat'>{html.escape(x.caveat)}</span>" if x.caveat else "")),
                        sizing_mode="stretch_width")
-                for name, x in GAUGES.items()]
-        key = "&emsp;".join(swatch(GAUGE_COLORS[name], name, dashed=name != "original") for name in GAUGES)
+                for name, x in gauges.items()]
+        key = "&emsp;".join(swatch(GAUGE_COLORS[name], name, dashed=name != "original") for name in gauges)
         self.method = note("")
         self.follow(g, "results", "method")
         self.study.param.watch(lambda e: self.changed(), "scene")
         button = pn.widgets.Button(name="Open the charged particle", button_type="primary")
-        button.on_click(lambda event: self.study.param.update(
-            scene=next(s.name for s in SCENES.values() if has_gauges(s))))
+        button.on_click(lambda event: self.study.param.update(scene=gauged_scene().name))
         self.away = pn.Column(note("<p>The gauge study is about the charged particle in a time-dependent field.</p>"),
                               button)
         self.floor = note("")
@@ -151,7 +151,7 @@ class GaugeView(FeatureView):
 
     def update(self):
         g = self.state
-        on = has_gauges(self.study.scene_obj)
+        on = self.study.scene_obj.has_gauges
         self.away.visible, self.body.visible = not on, on
         if not on or g.results is None:
             return

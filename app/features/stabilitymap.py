@@ -34,34 +34,27 @@ MAP_MAX_SIDE = 100
 # whose workers need cosymp installed; unset, in this process on a thread pool.
 SCHEDULER_ENV = "COSYMP_DASK_SCHEDULER"
 MAP_MAX_STEPS = 200_000_000
-# First axes per scene: (x name, start, stop, log), (y name, start, stop, log).
-MAP_AXES = {
-    "decaying": (("h", 0.05, 3.0, True), ("lam", 0.1, 5.0, False), "error_final"),
-    "damped": (("h", 0.05, 3.0, True), ("gamma", -0.5, 0.5, False), "error_final"),
-    "modulated": (("alpha", 0.5, 4.5, False), ("eps", 0.0, 0.8, False)),
-    "charged": (("h", 0.001, 0.1, True), ("B0", 0.0, 2.0, False)),
-    "kapitza": (("nu", 5.0, 80.0, False), ("a", 0.0, 0.5, False)),
-}
 LOG_MEASURES = ("H_ext_max_abs", "det_max_dev", "error_final")
 HEIGHT = 480
 SIGNIFICANT = 4  # a cell opened in Orbits carries its values to this many significant digits
 
 
 def map_axes(scene):
-    """The Stability map's first axes for a scene: its MAP_AXES entry, else h on a log axis around
-    the scene's step by its first parameter that is not an initial condition, over its slider range."""
-    if scene.name in MAP_AXES:
-        return MAP_AXES[scene.name][:2]
+    """The Stability map's first axes for a scene, (name, start, stop, log) for x and y: those it
+    declares (Scene.map_axes), else h on a log axis around the scene's step by its first parameter
+    that is not an initial condition, over its slider range."""
+    if scene.map_axes is not None:
+        return scene.map_axes
     p = next(p for p in scene.params if not p.initial and not p.choices and not isinstance(p.default, str))
     return ("h", scene.h / 4, 8 * scene.h, True), (p.name, *soft_range(p), False)
 
 
 def first_measure(scene):
-    """What a scene's first map shows: growth, or the MAP_AXES entry's measure where growth says
-    nothing (the damped oscillator grows at γ/2 with every method, and every structure-preserving
-    method's growth on the decaying one is 0 to round-off: their errors show the methods apart)."""
-    entry = MAP_AXES.get(scene.name, ())
-    return entry[2] if len(entry) > 2 else "growth"
+    """What a scene's first map shows: the measure it declares (Scene.map_measure), growth unless
+    growth says nothing (the damped oscillator grows at γ/2 with every method, and every structure-
+    preserving method's growth on the decaying one is 0 to round-off: their errors show the methods
+    apart)."""
+    return scene.map_measure
 
 
 def map_bytes(points):

@@ -9,8 +9,10 @@ family's data. Numba types each class as a distinct type, so one generic kernel 
 ``cache=True`` specializes per (scene, family) and its cache entry survives a new process: no
 function object ever appears in a cached signature (STYLE.md, "Numba caching").
 
-Each stub below is resolved by the class of its first argument, through the registries
-``cosymp.scenes.KERNELS`` and ``cosymp.kernels.registry.FAMILIES``.
+Each stub below is resolved by the class of its first argument, through the table that
+`register` fills: each scene registers its kernel where it is defined (scenes.base.Scene) and
+each method family where the families are listed (kernels.registry), so this generic layer
+imports neither.
 """
 import inspect
 
@@ -39,12 +41,24 @@ _INLINE = {k: v for k, v in INLINE.items() if k != "cache"}
 _IR_INLINE = {k: v for k, v in JIT.items() if k != "cache"}
 
 
-def _target(cls, name):
-    from ..scenes import KERNELS
-    from .registry import FAMILIES
+_REGISTERED = {}
 
-    table = KERNELS.get(cls) or FAMILIES.get(cls)
-    fn = getattr(table, name, None)
+
+def register(cls, table):
+    """Make `table` (a scene's SceneKernel, a family's FamilyKernel) what the stubs below resolve
+    to for parameter tuples of class `cls`."""
+    _REGISTERED[cls] = table
+
+
+def registered(cls):
+    """The table registered for class `cls`."""
+    if cls not in _REGISTERED:
+        raise TypingError(f"{cls.__name__} is not registered: define its scene or family first")
+    return _REGISTERED[cls]
+
+
+def _target(cls, name):
+    fn = getattr(registered(cls), name, None)
     if fn is None:
         raise TypingError(f"{cls.__name__} provides no '{name}'")
     return fn

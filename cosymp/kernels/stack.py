@@ -13,7 +13,7 @@ from numba.core.errors import TypingError
 from numba.extending import intrinsic, overload
 from numba.np.arrayobj import make_array, populate_array
 
-from .dispatch import _IR_INLINE
+from .dispatch import _IR_INLINE, registered
 
 
 @intrinsic(prefer_literal=True)
@@ -43,9 +43,7 @@ def stack_array(typingctx, shape, like):
 
 
 def _scene(P):
-    from ..scenes import KERNELS
-
-    return KERNELS[P.instance_class]
+    return registered(P.instance_class)
 
 
 MAX_STAGES = 16

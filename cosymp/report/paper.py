@@ -1,5 +1,9 @@
 """The paper's Sections 4 and 5, figure by figure with its printed parameters, and a
-work-precision diagram: `paper_report(progress)` returns the Report."""
+work-precision diagram: `paper_report(progress)` returns the Report.
+
+What it recomputes comes from the scenes' declarations (Scene.paper: the section, the printed
+values and the long run): an oscillator section for each such scene, a gauge section for one
+with gauges, and a work-precision section for each oscillator."""
 from functools import partial
 
 import numpy as np
@@ -7,7 +11,7 @@ import numpy as np
 from .. import workprecision as wp
 from ..integrate import Setup
 from ..methods import METHODS
-from ..scenes import SCENES, charged
+from ..scenes import SCENES
 from ..study import compare, gauge_study
 from ..summary import long_envelopes
 from . import Figure, Report, Section, Series, Table
@@ -17,11 +21,6 @@ SCHEME = "symplectic-euler"
 REFERENCE = "rk4"
 DELTA = 1e-4
 LONG_BINS = 2000
-OSCILLATORS = (
-    ("damped", "Section 4.1: damped harmonic oscillator", {"gamma": 0.2}, {"gamma": 2e-4}, 5e5),
-    ("modulated", "Section 4.2: harmonic oscillator with time-dependent potential", {}, {}, 2e5),
-)
-WP_SCENES = ("damped", "modulated")
 WP_METHODS = ("rk4", "rk8", "midpoint", "symplectic-euler", "gauss4", "gauss6", "leapfrog", "blanes-moan6")
 GAUGE_QUANTITIES = (("x", "q", 0), ("y", "q", 1), ("p_x", "p", 0), ("p_y", "p", 1), ("Π_x", "Pi", 0), ("Π_y", "Pi", 1))
 
@@ -29,18 +28,20 @@ GAUGE_QUANTITIES = (("x", "q", 0), ("y", "q", 1), ("p_x", "p", 0), ("p_y", "p", 
 def paper_report(progress=None, long=True, work_precision=True, command="cosymp report paper -o paper.html"):
     """The report; `long=False` and `work_precision=False` leave out the long runs and the
     work-precision diagram (each a Section saying so) for a quick look."""
-    stages = [("oscillator", o) for o in OSCILLATORS] + [("gauges", None)]
-    stages += [("wp", sc) for sc in WP_SCENES] if work_precision else []
+    printed = [s for s in SCENES.values() if s.paper is not None]
+    oscillators = [s for s in printed if not s.has_gauges]
+    stages = [("oscillator", s) for s in oscillators] + [("gauges", s) for s in printed if s.has_gauges]
+    stages += [("wp", s.name) for s in oscillators] if work_precision else []
     total = len(stages)
     tell = progress or (lambda done, total, what: None)
     sections = []
     for i, (kind, arg) in enumerate(stages):
         if kind == "oscillator":
-            tell(i, total, arg[1])
-            sections.append(_oscillator(*arg, long=long, progress=partial(_percent, tell, i, total)))
+            tell(i, total, arg.paper.section)
+            sections.append(_oscillator(arg, long=long, progress=partial(_percent, tell, i, total)))
         elif kind == "gauges":
-            tell(i, total, "Section 5: gauges")
-            sections.append(_gauges())
+            tell(i, total, arg.paper.section)
+            sections.append(_gauges(arg))
         else:
             tell(i, total, f"work-precision, {arg}")
             sections.append(_work_precision(arg, partial(_relay, tell, i, total, f"work-precision {arg}")))
@@ -67,8 +68,9 @@ def _relay(tell, i, total, prefix, done, steps, what):
     tell(i, total, f"{prefix}: {what}")
 
 
-def _oscillator(name, title, values, long_values, T_long, long, progress):
-    scene = SCENES[name]
+def _oscillator(scene, long, progress):
+    name, title, values = scene.name, scene.paper.section, scene.paper.values
+    long_values, T_long = scene.paper.long_values, scene.paper.T_long
     runs = [(m, compare(Setup.make(name, m, values), scene.h, scene.T, delta=DELTA)) for m in (SCHEME, REFERENCE)]
     text = [f"{scene.summary} Printed parameters: h = {scene.h:g}, T = {scene.T:g}"
             + "".join(f", {k} = {v:g}" for k, v in values.items()) + ".", *scene.notes]
@@ -129,9 +131,8 @@ def _long_figures(name, values, T_long, progress):
     return figs
 
 
-def _gauges():
-    scene = SCENES["charged"]
-    study = gauge_study(SCHEME, {}, scene.h, scene.T)
+def _gauges(scene):
+    study = gauge_study(scene, SCHEME, {}, scene.h, scene.T)
     text = [
         (f"{scene.summary} Printed parameters: h = {scene.h:g}, T = {scene.T:g}, the paper's Euler-type scheme in "
         "each gauge (per-gauge runs). Positions and mechanical momenta Π = p − eA agree across gauges up to the "
@@ -144,7 +145,7 @@ def _gauges():
     for name, kind, k in GAUGE_QUANTITIES:
         items.append(Figure(f"{name} in the five gauges", "t", name,
                             [Series(g, *_quantity(study[g]["per-gauge"], kind, k), color=GAUGE_COLORS[g])
-                             for g in charged.GAUGES],
+                             for g in scene.gauges],
                             caption="The paper's Fig. 'gauge' (trajectories, canonical and mechanical momenta), "
                                     "one curve per gauge; curves that coincide (x, y and Π in every gauge) hide "
                                     "each other: click legend entries to compare."))
@@ -152,14 +153,14 @@ def _gauges():
     for name, kind, k in GAUGE_QUANTITIES:
         base = _quantity(study["original"]["per-gauge"], kind, k)[1]
         series = [Series(g, t0, np.abs(_quantity(study[g]["per-gauge"], kind, k)[1] - base), color=GAUGE_COLORS[g])
-                  for g in charged.GAUGES if g != "original"]
+                  for g in scene.gauges if g != "original"]
         items.append(Figure(f"|{name} − {name} (original gauge)|", "t", "difference", series, logy=True,
                             caption="The paper's Fig. 'differences with respect to the original gauge': for x, y and "
                                     "Π the per-gauge runs differ at the method's order (the discrete map is not "
                                     "gauge-covariant); the transported map (G_χ applied to the original run) agrees "
                                     "to round-off (tests/test_gauges.py). A gauge whose χ depends on t only leaves x, y and Π unchanged "
                                     "(zero, not drawn)."))
-    return Section("Section 5: electric particle in an electromagnetic field, five gauges", text, items)
+    return Section(scene.paper.section, text, items)
 
 
 def _quantity(run, kind, k):

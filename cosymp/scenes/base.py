@@ -7,7 +7,7 @@ import numpy as np
 from numba import njit
 
 from ..errors import InputError, quoted
-from ..kernels.dispatch import INLINE
+from ..kernels.dispatch import INLINE, register
 
 
 @njit(**INLINE)
@@ -98,11 +98,61 @@ class SceneKernel:
 
 
 @dataclass(frozen=True)
+class Case:
+    """A run worth opening, declared by its scene: one of the paper's figures, or a hard case
+    (hard=True: where the paper's gentle parameters are left behind). The app offers each as a
+    link, and tests/test_hard_cases.py runs every one.
+
+    method, other: the method and the one it is compared with; h, T, values: the run (values
+    differ from the scene's defaults); view: what shows it ('compare', 'long', 'gauges' or
+    'play'); T_long: the long run's horizon; fails: the methods whose run stops early by design
+    (with its message); lead: the app's first view (one case of all the scenes').
+    """
+
+    name: str
+    doc: str
+    method: str
+    other: str
+    h: float
+    T: float
+    values: dict = field(default_factory=dict)
+    view: str = "compare"
+    T_long: float = None
+    hard: bool = False
+    fails: tuple = ()
+    lead: bool = False
+
+
+@dataclass(frozen=True)
+class Paper:
+    """Where a scene is in the paper's numerical sections, as `cosymp report paper` recomputes
+    them: the section's title, the values its figures print (beside the scene's h and T), and
+    its long run's values and horizon (T_long None: no long run)."""
+
+    section: str
+    values: dict = field(default_factory=dict)
+    long_values: dict = field(default_factory=dict)
+    T_long: float = None
+
+
+@dataclass(frozen=True, eq=False)
 class Scene:
-    """A time-dependent Hamiltonian system H(q, p, t), defined once.
+    """A time-dependent Hamiltonian system H(q, p, t), defined once, with all that cosymp's
+    command line, reports and app need of it (nothing outside scenes/ names a scene). A scene is
+    one object: equal only to itself, and hashable whatever its declarations hold.
 
     `pack` turns checked values into the kernel's parameter tuple (an instance of `Params`,
-    whose class selects the kernel); `initial` gives (q0, p0) in the scene's own coordinates.
+    whose class selects the kernel: defining a scene registers its kernel with the compiled
+    loops); `initial` gives (q0, p0) in the scene's own coordinates.
+
+    Declarations: `rank`, where the registry lists it (by rank, then name: the app's menu, the
+    reports, the tests); `paper` (Paper, or None); `cases` (Case tuple); `map_axes`, the Stability
+    map's first axes ((name, start, stop, log) for x and y; None: h around the scene's step by
+    its first parameter) and `map_measure`, the measure it opens on. Hooks of a scene with
+    gauges: `gauges` ({name: gauge}, the values of its 'gauge' parameter), `mechanical(P, t, q,
+    p)`, the gauge-invariant momentum, `gauge_map(P, t, q, p, pt, inverse=False)`, the map
+    G_chi from the original gauge to the one in P, and `gauge_jacobian(P_from, P_to, t)`, the
+    Jacobian in z of the change of gauge G_to o G_from^-1 at times t.
     """
 
     name: str
@@ -118,6 +168,18 @@ class Scene:
     time_scale: float
     coordinates: tuple = ("q",)
     notes: tuple = field(default_factory=tuple)
+    paper: Paper = None
+    cases: tuple = ()
+    map_axes: tuple = None
+    map_measure: str = "growth"
+    gauges: dict = None
+    mechanical: Callable = None
+    gauge_map: Callable = None
+    gauge_jacobian: Callable = None
+    rank: int = 100
+
+    def __post_init__(self):
+        register(self.Params, self.kernel)
 
     @property
     def ndof(self):
@@ -134,6 +196,20 @@ class Scene:
     @property
     def separable(self):
         return self.kernel.kick is not None
+
+    @property
+    def has_gauges(self):
+        return self.gauges is not None
+
+    @property
+    def T_long(self):
+        """The paper's long horizon for the scene, or None."""
+        return None if self.paper is None else self.paper.T_long
+
+    def momentum(self, P, t, q, p):
+        """The mechanical momentum of states (q, p) at times t where the scene defines one
+        (charged: p - e A), else None."""
+        return None if self.mechanical is None else self.mechanical(P, t, q, p)
 
     def needs_scaling(self, P, t_max):
         """Whether a run reaching |t| = t_max needs the scaled steps (decided per run, before it starts)."""

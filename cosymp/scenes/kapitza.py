@@ -5,7 +5,7 @@ import numpy as np
 from numba import njit
 
 from ..kernels.dispatch import INLINE
-from .base import Param, Scene, SceneKernel, free_drift
+from .base import Case, Param, Scene, SceneKernel, free_drift
 
 KapitzaParams = namedtuple("KapitzaParams", "w0 a nu")
 
@@ -73,4 +73,20 @@ SCENE = Scene(
     T=20.0,
     time_scale=0.1,
     notes=("Not in the paper: the classic teaching case of a time-dependent Hamiltonian.",),
+    cases=(
+        Case("Kapitza: stabilized inverted pendulum",
+             "Started near the top (q0 = 3.0) with a fast-driven pivot (a = 0.1, ν = 40), the pendulum "
+             "stays up, wobbling at the drive frequency.",
+             "midpoint", "rk4", 0.002, 20.0, values={"q0": 3.0, "a": 0.1, "nu": 40.0}, view="play"),
+        Case("Kapitza: Newton at a large step",
+             "h = 0.1 with the drive at nu = 40 (h nu = 4): Newton still converges to round-off every "
+             "step, and the pendulum stays up.",
+             "midpoint", "rk4", 0.1, 20.0, values={"q0": 3.0, "a": 0.1, "nu": 40.0}, hard=True),
+        Case("Kapitza: Newton fails",
+             "a = 0.3 at h = 0.5: the midpoint equations have no nearby solution; the message names "
+             "the step and the data up to it stay.",
+             "midpoint", "rk4", 0.5, 100.0, values={"q0": 3.0, "a": 0.3, "nu": 40.0}, hard=True, fails=("midpoint",)),
+    ),
+    map_axes=(("nu", 5.0, 80.0, False), ("a", 0.0, 0.5, False)),
+    rank=5,
 )

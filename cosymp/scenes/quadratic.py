@@ -1,14 +1,43 @@
 """Scenes whose H is quadratic in z = (q, p): H = z.S(t).z / 2 + s(t).
 
-Such a scene only writes its coefficient function, filling row r of C with S (row-major, 2n x 2n),
-dS/dt, s and ds/dt and ending with `finish`, which appends J S (the matrix of the linear vector
-field, read by the step builders); energy, gradient, Hessian and dH/dt below serve them all, and
-`kick` the splitting methods of a separable one (S_qp = 0).
+Such a scene only writes its coefficient function: `clear` row r of C, set S(t), dS/dt, s(t) and
+ds/dt with `put_S`, `put_dS`, `put_s`, `put_ds` (z = (q, p), so S[i, j] with i, j < n couples q_i
+and q_j, S[n + i, n + j] p_i and p_j), and end with `finish`, which appends J S (the matrix of the
+linear vector field, read by the step builders). Energy, gradient, Hessian and dH/dt below serve
+them all, and `kick` the splitting methods of a separable one (S_qp = 0). A row holds, in order:
+S (row-major, 2n x 2n), dS/dt, s, ds/dt and J S (`ncoef`).
 """
 import numpy as np
 from numba import njit
 
 from ..kernels.dispatch import INLINE, IR_INLINE, ndof
+
+
+@njit(**INLINE)
+def put_S(P, C, r, i, j, value):
+    """S[i, j] = value in row r (set S[j, i] too: S is symmetric)."""
+    C[r, i * 2 * ndof(P) + j] = value
+
+
+@njit(**INLINE)
+def put_dS(P, C, r, i, j, value):
+    """dS/dt[i, j] = value in row r."""
+    m = 2 * ndof(P)
+    C[r, m * m + i * m + j] = value
+
+
+@njit(**INLINE)
+def put_s(P, C, r, value):
+    """The z-independent part s(t) of H in row r."""
+    m = 2 * ndof(P)
+    C[r, 2 * m * m] = value
+
+
+@njit(**INLINE)
+def put_ds(P, C, r, value):
+    """ds/dt in row r."""
+    m = 2 * ndof(P)
+    C[r, 2 * m * m + 1] = value
 
 
 @njit(**INLINE)
