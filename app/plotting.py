@@ -210,7 +210,7 @@ class Curves:
         """The log axis' Pair (built, and decorated, on the first call)."""
         if self.log is None:
             title, x_label, y_label = self.labels
-            self.log = Pair(figure(title if self.always_log else f"{title}: |·| on a log axis (decades apart)",
+            self.log = Pair(figure(title if self.always_log else f"{title} (|·|, log axis)",
                                    x_label, y_label if self.always_log else f"|{y_label}|", logy=True))
             for add in self.decorations:
                 add(self.log.fig)

@@ -79,8 +79,8 @@ def test_the_final_error_without_an_exact_flow_is_the_reports_and_the_verdict_sa
         assert common.numbers(s.results)[e.label][3] == plotting.fmt(e.final_error)
     midpoint, rk4 = s.results.entries
     assert midpoint.final_error > 10 * rk4.final_error
-    assert f"Its final error is the larger, though ({midpoint.final_error:.2g} against {rk4.final_error:.2g})" \
-        in common.verdict(s.results)
+    assert (f"{midpoint.label}'s final error is the larger, though ({midpoint.final_error:.2g} against "
+            f"{rk4.final_error:.2g})") in common.verdict(s.results)
     assert "so relative to a reference run, rk8 at h" in orbits.remark(s.results)
     figs = shown_figures(drawn(orbits.OrbitsView(s)))
     assert plotted(figs.error).size > 0
@@ -88,7 +88,7 @@ def test_the_final_error_without_an_exact_flow_is_the_reports_and_the_verdict_sa
         assert e.comparison.error[0] == 0.0 and e.comparison.error[-1] == e.final_error
     assert "Nothing bounds it over longer runs" in common.verdict(s.results), "no claim the data do not show"
     s.T = 1e4  # 2e6 steps at h 0.005: its reference would be too long for a live view
-    assert all(e.final_error is None for e in s.results.entries) and "Its final error" not in common.verdict(s.results)
+    assert all(e.final_error is None for e in s.results.entries) and "final error is the larger" not in common.verdict(s.results)
     assert "more than 2e+05 rk8 steps" in orbits.remark(s.results)
     damped = Study(scene="damped")
     assert [e.final_error for e in damped.results.entries] == [e.comparison.error[-1] for e in damped.results.entries]

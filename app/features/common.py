@@ -87,7 +87,8 @@ def phase_note(kept, lost):
         return ""
     orders = [METHODS[e.method].order_at(0.5 if e.comparison.setup.theta is None else e.comparison.setup.theta)
               for e in (kept, lost)]
-    return (f" Its final error is the larger, though ({a:.2g} against {b:.2g}): of order {orders[0]} against "
+    return (f" {html.escape(kept.label)}'s final error is the larger, though ({a:.2g} against {b:.2g}): of order "
+            f"{orders[0]} against "
             f"{orders[1]}, {html.escape(kept.label)} follows the trajectory less closely at this h; what structure "
             "preservation buys is the band of H + p_t, not the trajectory.")
 

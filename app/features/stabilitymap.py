@@ -134,6 +134,13 @@ class StabilityMap(Job):
                              "use fewer cells, larger h or a shorter T (or run `cosymp sweep` on a cluster)")
         return plan
 
+    def planned(self):
+        """The plan of the map the controls ask for, or None if they ask for none."""
+        try:
+            return self._inputs()
+        except InputError:
+            return None
+
     def _bytes(self, plan):
         return map_bytes(plan.size)
 
@@ -234,8 +241,9 @@ class MapPlot:
                               fill_color=transform("z", self.mapper), line_color=transform("z", self.mapper),
                               line_width=0.6, nonselection_fill_alpha=1.0, nonselection_line_alpha=1.0)
         # Edges in the cell's own colour: without them anti-aliasing drew white hairlines between cells.
-        self.fig.add_layout(ColorBar(color_mapper=self.mapper, width=12,
-                                     formatter=CustomJSTickFormatter(code=LOG_TICKS if logz else TICKS)), "right")
+        self.bar = ColorBar(color_mapper=self.mapper, width=12, title_standoff=6,
+                            formatter=CustomJSTickFormatter(code=LOG_TICKS if logz else TICKS))
+        self.fig.add_layout(self.bar, "right")
         self.fig.add_tools(HoverTool(renderers=[quads], tooltips=[("x", "@x{0.[0000]}"), ("y", "@y{0.[0000]}"),
                                                                   ("value", "@z")]), TapTool(renderers=[quads]))
         self.source.selected.on_change("indices", lambda attr, old, new: new and on_tap(
@@ -258,6 +266,7 @@ class MapPlot:
         self.fig.title.text = f"{plan.measures[0]} of {plan.method} on {plan.scene}" + (
             f": 0 to round-off in every cell (|value| ≤ {ROUND_OFF:g})" if flat else "")
         self.fig.xaxis.axis_label, self.fig.yaxis.axis_label = ax.name, ay.name
+        self.bar.title = plan.measures[0]
 
 
 MAP_TEXT = ("<p>One measure of the sidebar's method over a grid of two varied quantities (scene parameters, h, T "
@@ -314,7 +323,8 @@ class StabilityMapView(FeatureView):
     def update(self):
         m = self.state
         result = m.result
-        self.text.object = MAP_TEXT.format(command=html.escape(map_command(result.plan)) if result else
+        plan = result.plan if result else m.planned()
+        self.text.object = MAP_TEXT.format(command=html.escape(map_command(plan)) if plan else
                                            "cosymp sweep SCENE --vary NAME=START:STOP:NUM ...")
         self.failures.object = map_failures(result)
         if result is None:

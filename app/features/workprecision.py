@@ -407,7 +407,8 @@ class DriftPlot:
         for solver in dict.fromkeys(r["solver"] for r in rows):
             mine = [r for r in pts if r["solver"] == solver]
             g = wp.growth_exponent(rows, solver, key)
-            curves[f"{solver}: slope {g:.2f}" if finite(g) else f"{solver}: slope –"] = (
+            slope = f"{g:.2f}".replace("-0.00", "0.00") if finite(g) else "–"
+            curves[f"{solver}: slope {slope}"] = (
                 [r["T"] for r in mine], [r[key] for r in mine], False, solver)
         self.curves.set(curves)
         self.dots.data = {"x": np.array([r["T"] for r in pts]), "y": np.array([r[key] for r in pts]),
