@@ -268,7 +268,7 @@ def test_tabs_are_built_ahead_one_at_a_time_while_the_page_is_idle_and_start_no_
     """App._ahead builds one more tab per call, hidden, once the server (every page) has been idle
     AHEAD_IDLE_S: its layout, and the data at hand drawn; nothing is computed for it (the θ lesson, the long run
     and the map start on their first showing: computed ahead, every page would hold their memory
-    leases). Gauges is not built ahead. Orbits builds the figures of the
+    leases). Gauges and Work-precision are not built ahead. Orbits builds the figures of the
     two-degree-of-freedom shape, hidden."""
     app = main.App()
     names = [f.name for f in FEATURES]
@@ -289,8 +289,8 @@ def test_tabs_are_built_ahead_one_at_a_time_while_the_page_is_idle_and_start_no_
     gone._stop(None)
     for _ in range(len(FEATURES)):
         app._ahead()
-    assert app._ahead_done == {f.name for f in FEATURES if f.ahead} == set(names) - {"gauges"}
-    assert [len(app.tabs[i]) for i in range(len(names))] == [n != "gauges" for n in names]
+    assert app._ahead_done == {f.name for f in FEATURES if f.ahead} == set(names) - {"gauges", "workprecision"}
+    assert [len(app.tabs[i]) for i in range(len(names))] == [n not in ("gauges", "workprecision") for n in names]
     assert app.tabs.active == names.index("compare") and app.study.view == "compare"
     lesson = app.states["theta"]
     assert lesson.results is None and not app.states["long"].data and app.states["map"].result is None

@@ -595,6 +595,7 @@ class Measurements:
         self.long.release()
 
 
-# Built ahead like the others (not measured ahead): a measurement this server made shows at once on a
-# first visit, and its layout then took the browser 1-2 s.
-FEATURE = Feature("workprecision", "Work–precision", WorkPrecisionView, Measurements)
+# Not built ahead: its 700 models made every later change of the page slower (Bokeh walks the whole model
+# graph when models are swapped): scene changes 173 -> 255 ms median, θ's 20 presses 509 -> 985 ms. Its
+# first visit builds it (about 1 s) and shows the server's measurement of the inputs, if it made one.
+FEATURE = Feature("workprecision", "Work–precision", WorkPrecisionView, Measurements, ahead=False)
