@@ -61,6 +61,7 @@ class Run:
         self.inputs = inputs
         self.lease = lease
         self.cancelled = False
+        self.discarded = False  # what it still publishes is dropped (Job.discard)
         self.latest = (0, 1, "starting")
         self.partial = None
         self.result = None
@@ -130,7 +131,8 @@ class Run:
                 told = time.perf_counter()
             if self.partial is not None and (ended or time.perf_counter() >= drawn + interval):
                 partial, self.partial = self.partial, None
-                on_partial(self.inputs, partial)
+                if not self.discarded:
+                    on_partial(self.inputs, partial)
                 drawn = time.perf_counter()
             if ended:
                 return
@@ -196,6 +198,18 @@ class Job(param.Parameterized):
         self._done = self._wanted = max(self._done, self._wanted)
         if self.run is not None:
             self.run.cancelled = True
+
+    def discard(self):
+        """Stop the computation under way and drop what it still publishes (its inputs no longer
+        apply: another scene)."""
+        self.cancel()
+        if self.run is not None:
+            self.run.discarded = True
+
+    @property
+    def busy(self):
+        """A computation is under way that is not being stopped."""
+        return self.running and not (self.run is not None and self.run.cancelled)
 
     def release(self):
         """The page is gone: stop, give back the memory, publish nothing more."""

@@ -191,8 +191,8 @@ class App(param.Parameterized):
 
     def _ahead(self):
         """Build one more tab ahead of its first showing, hidden, while the server is idle (no
-        change in any page for AHEAD_IDLE_S, nothing computing in this one): a first visit then shows it at once (it cost 0.5-1.8 s
-        to build there, most of it the browser's), at the price of the server's time (0.1-0.4 s a
+        change in any page for AHEAD_IDLE_S, nothing computing in this one): a first visit then shows
+        it at once (it cost 0.5-1.8 s to build there, most of it the browser's), at the price of the server's time (0.1-0.4 s a
         tab, in idle time) and the page's memory. One tab every AHEAD_MS, those of features with
         `ahead`; the shown tab's view also gets its turn (Orbits builds the figures of other scenes'
         shapes)."""
@@ -215,9 +215,8 @@ class App(param.Parameterized):
         return session is not None and session.connection_count == 0
 
     def _next_ahead(self):
-        doc = pn.state.curdoc
-        if doc is not None and doc.session_context is not None:  # served: no idle time otherwise
-            doc.add_timeout_callback(self._ahead, AHEAD_MS)
+        if self._doc is not None and self._doc.session_context is not None:  # served: no idle time otherwise
+            self._doc.add_timeout_callback(self._ahead, AHEAD_MS)
 
     def _build(self, name):
         box = self.tabs[[f.name for f in FEATURES].index(name)]

@@ -377,8 +377,13 @@ def test_a_scene_change_drops_another_scenes_long_run_and_map_and_the_shown_tab_
             app.study.scene = "decaying"
 
     lr.param.watch(switch, "progress")
+    drawn = []  # (scene of the run, scene shown) of each partial result drawn
+    partial = lr._partial
+    lr._partial = lambda inputs, data: (drawn.append((inputs[4], app.study.scene)), partial(inputs, data))
     app.study.view = "long"
     assert switched and not lr.running
+    assert ("damped", "decaying") not in drawn and ("decaying", "decaying") in drawn, \
+        "the stopped run's last envelopes are dropped (Job.discard)"
     assert lr.setting.startswith("decaying:") and lr.data and lr.status.startswith("done"), (lr.setting, lr.status)
     app.study.view = "map"
     assert app.states["map"].result.plan.scene == "decaying"

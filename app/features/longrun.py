@@ -73,7 +73,7 @@ class LongRun(Job):
     def _on_scene(self, event):
         """Another scene: the run under way stops and the old scene's data goes (the view starts a
         run of the new one when its tab is shown: `wanted`)."""
-        self.cancel()
+        self.discard()
         self.param.update(data={}, setting="", T_long=long_horizon(self.study.scene, self.study.T))
 
     def say(self, note_):
@@ -137,8 +137,6 @@ class LongRun(Job):
         return done, all(active)
 
     def _partial(self, inputs, data):
-        if inputs[4] != self.study.scene:  # the last envelopes of a run stopped by a scene change
-            return
         self.data = data
         for label, d in data.items():
             if d["failure"] and label not in self._said:
@@ -219,9 +217,8 @@ class LongRunView(FeatureView):
             sizing_mode="stretch_width")
 
     def wanted(self):
-        lr = self.state
-        if not lr.data and (not lr.running or lr.run.cancelled):
-            lr.request()
+        if not self.state.data and not self.state.busy:
+            self.state.request()
 
     def update(self):
         data = self.state.data

@@ -105,7 +105,7 @@ class StabilityMap(Job):
         """The axes of the study's scene and method; after a change of either, the map under way
         stops and the old map goes (the view computes the new one when its tab is shown: `wanted`)."""
         if events:
-            self.cancel()
+            self.discard()
             self.job = None
             self.param.update(result=None, setting="")
         names = sweep.variables(self.study.scene_obj, METHODS[self.study.method])
@@ -316,9 +316,8 @@ class StabilityMapView(FeatureView):
                          row, status, self.box, self.failures, sizing_mode="stretch_width")
 
     def wanted(self):
-        m = self.state
-        if m.result is None and (not m.running or m.run.cancelled):
-            m.request()
+        if self.state.result is None and not self.state.busy:
+            self.state.request()
 
     def update(self):
         m = self.state

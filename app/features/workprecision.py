@@ -120,7 +120,7 @@ class Measurement(Job):
 
     def drop(self):
         """Another scene: the measurement under way stops and the old scene's rows go."""
-        self.cancel()
+        self.discard()
         self.job = None
         self.param.update(rows=[], setting="")
 
@@ -185,8 +185,6 @@ class WorkPrecision(Measurement):
                           progress=run.report, partial=run.publish)
 
     def _partial(self, job, rows):
-        if job.scene != self.study.scene:  # the last rows of a measurement stopped by a scene change
-            return
         self.job = job
         self.param.update(rows=rows, setting=f"{self._describe(job)} (measuring)")
 
@@ -561,7 +559,7 @@ class WorkPrecisionView(FeatureView):
 
     def wanted(self):
         m = self.state.measure
-        if not m.rows and (not m.running or m.run.cancelled) and not m.recall():
+        if not m.rows and not m.busy and not m.recall():
             m.request()
 
     def update(self):
