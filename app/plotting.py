@@ -339,14 +339,17 @@ def vline(fig, color="#868e96"):
 def push(update):
     """Run update() (which changes Bokeh models) so that its changes reach the page as one message.
     While a page's document is being built its changes are simply in it: its first figures arrive
-    with their data (they were sent empty and filled by a second message, drawn twice). Later, until
-    the page has loaded, from a callback on the session's loop that holds the document's lock (a
-    background run's first results). The document's model graph is recomputed once, at the end, and
-    only if a change asked for it (`deferred_graph`)."""
+    with their data (they were sent empty and filled by a second message, drawn twice). Once the
+    session exists and until the page has loaded, when it has loaded (a background run's first
+    results): a change made while the browser pulls the document could be lost for good. BokehJS
+    drops a change message that arrives before the document, which it expects to hold the change,
+    but the server writes the document it serialised before the change after the change's message
+    (a map finished while its page connected was never drawn). The document's model graph is
+    recomputed once, at the end, and only if a change asked for it (`deferred_graph`)."""
     doc = pn.state.curdoc
     context = getattr(doc, "session_context", None)
     if context is not None and context.session is not None and not pn.state.loaded:
-        doc.add_next_tick_callback(update)
+        pn.state.onload(update)
         return
     with unlocked(), (deferred_graph(doc) if doc is not None else contextlib.nullcontext()):
         update()
