@@ -15,7 +15,7 @@ from app import jobs, memory, plotting, study
 from app.features import cloud, common, gauges, longrun, orbits, structure, theta
 from app.plotting import DENSE, POINTS, Raster
 from app.presets import PRESETS, URL_NAMES, parse_items, query_items
-from app.study import Study
+from app.study import QUICK_S, Study
 from cosymp.reference import reference_final
 from cosymp.scenes import SCENES
 
@@ -419,6 +419,20 @@ def test_theta_lesson_waits_until_it_is_shown():
     assert lesson.results is None
     s.view = "theta"
     assert lesson.results is not None
+
+
+def test_theta_lesson_is_computed_in_the_handler_where_the_last_lesson_or_comparison_was_quick():
+    """A first visit has no lesson of the scene yet: the sidebar's comparison (two runs of the same
+    steps) stands in for its cost; once computed, the lesson's own cost per step decides."""
+    Study(scene="damped")  # its kernels loaded: the next comparison's cost is the computation's
+    theta.LESSON_SECONDS_PER_STEP.pop("damped", None)
+    s = Study(scene="damped")
+    lesson = theta.ThetaLesson(s)
+    assert lesson.quick(), "damped's 500-step comparison took well under QUICK_S"
+    s.view = "theta"
+    assert theta.LESSON_SECONDS_PER_STEP["damped"] > 0
+    theta.LESSON_SECONDS_PER_STEP["damped"] = 2 * QUICK_S / 500
+    assert not lesson.quick(), "the lesson's own cost, not the comparison's"
 
 
 def test_gauge_study_gives_every_gauge_and_invariant_transported_observables():

@@ -6,11 +6,11 @@ import panel as pn
 import param
 
 from cosymp.drive import Drive
-from cosymp.errors import RunError
+from cosymp.errors import InputError, RunError
 from cosymp.integrate import Setup, check_step
 
 from ..plotting import FLOOR, SLOTS, Curves, Pair, figure, grid, note, pane, vline
-from ..study import Runs, comparison_bytes, failure_note, run_pair
+from ..study import QUICK_S, SECONDS_PER_STEP, Runs, comparison_bytes, failure_note, run_pair
 from .base import Feature, FeatureView, Follower
 from .cloud import Snapshots, loops
 from .common import color_key
@@ -20,6 +20,7 @@ SWEEP_THETAS = np.linspace(0.0, 1.0, 21)
 SWEEP_STEPS = 200
 METHODS = ("theta", "theta-naive")
 LESSON_THETA = 0.3  # where the two methods differ (at 1/2 they are the same method)
+LESSON_SECONDS_PER_STEP = {}  # scene -> what its last lesson in this server took per step (the θ sweep included)
 
 TEXT = ("<p>Both methods evaluate H at an intermediate point of each step. The <b>lifted</b> θ-method (the "
         "paper's cotangent lift) puts q at θ and p at 1 − θ: it is symplectic on every time slice <b>for every "
@@ -96,8 +97,22 @@ class ThetaLesson(Follower):
         if note_:
             self.say(note_)
 
+    def quick(self):
+        """Whether the lesson is expected to take at most QUICK_S: by the last lesson of this scene in
+        this server, else by the sidebar's last comparison (two runs of the same steps, the same
+        diagnostics). A quick lesson is computed in the handler of the change that asks for it (a first
+        visit of the tab: its eight figures then come with the tab, not in a second message)."""
+        s = self.study
+        rate = LESSON_SECONDS_PER_STEP.get(s.scene, SECONDS_PER_STEP.get((s.scene, s.method, s.other)))
+        try:
+            return rate is not None and rate * check_step(s.h, s.T) <= QUICK_S
+        except InputError:
+            return False
+
     def _done_in(self, inputs, elapsed):
-        """A live view keeps no status line."""
+        """A live view keeps no status line; its cost per step is noted (`quick`)."""
+        scene, _, h, T, _ = inputs
+        LESSON_SECONDS_PER_STEP[scene] = elapsed / check_step(h, T)
 
 
 class ThetaView(FeatureView):
