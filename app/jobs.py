@@ -8,6 +8,8 @@ result (HOLD), when a newer result replaces it. It publishes its progress (fract
 and partial results (a long run's envelopes) to the event loop as they come, can be cancelled
 (at its next progress report), and after `release()` (the page was closed) it stops and nothing
 more is published: drawn for a destroyed document, a result would keep the whole session alive.
+A deterministic computation (a map, a long run) is remembered by the server for every page
+(`Job.KEEP`, `REMEMBERED`): asked for again, by this page or another, it is shown at once.
 
 Under `panel serve` the loop side runs as a task on the session's event loop (param's async
 executor); without a server the same code runs to completion before the call returns, so the
@@ -15,6 +17,7 @@ states are testable in a plain Python session.
 """
 import asyncio
 import dataclasses
+import datetime
 import functools
 import math
 import threading
@@ -30,6 +33,9 @@ PROGRESS_S = 0.25  # progress reaches the page at most this often
 # Quick results (Job.quick) reach the page at most this often: a burst of changes (a slider moved by
 # the arrow keys) asked for one each, and the page drew them one after the other, about 50 ms apiece.
 QUICK_GAP_S = 0.1
+# (KIND, key of the inputs) -> (result, datetime computed) of the deterministic computations of any
+# page of this server (Job.KEEP): a class opening the same tab computes it once, not once per student.
+REMEMBERED = {}
 
 # What a computation may raise besides cosymp's own errors (InputError is a ValueError, RunError a
 # RuntimeError): each becomes a message and the session goes on.
@@ -154,6 +160,7 @@ class Job(param.Parameterized):
     WHAT = "this computation"
     PREFIX = ""  # put before a message about refused inputs
     HOLD = False  # hold the lease while the result is shown (a live view), not only while computing
+    KEEP = 0  # how many of its results of distinct inputs (`_key`) the server remembers for every page
 
     def __init__(self, **params):
         super().__init__(**params)
@@ -184,8 +191,20 @@ class Job(param.Parameterized):
     def quick(self):
         """Whether the computation the inputs ask for is expected to take so little (a few tens of ms)
         that it runs in the handler of the change that asked for it: its results then reach the page
-        in the same message as the change's other effects, and the page is laid out once, not twice."""
-        return False
+        in the same message as the change's other effects, and the page is laid out once, not twice.
+        A remembered result is quick."""
+        return self._recallable() is not None
+
+    def _recallable(self):
+        """The remembered (result, when) of the current inputs, or None."""
+        if not self.KEEP:
+            return None
+        try:
+            inputs = self._inputs()
+        except InputError:
+            return None
+        key = None if inputs is None else self._key(inputs)
+        return None if key is None else REMEMBERED.get((self.KIND, key))
 
     def start(self):
         """Start a computation unless one is running (a button's action)."""
@@ -256,6 +275,10 @@ class Job(param.Parameterized):
             inputs = self._inputs()
             if inputs is None:
                 return None
+            key = self._key(inputs) if self.KEEP else None
+            if (self.KIND, key) in REMEMBERED:
+                self._recalled(inputs, *REMEMBERED[(self.KIND, key)])
+                return None
             lease = memory.BUDGET.lease(self._bytes(inputs), self.WHAT)
         except InputError as err:
             self.say(Note("error", self.PREFIX + str(err)))
@@ -293,10 +316,35 @@ class Job(param.Parameterized):
                     previous.release()
             self._finish(run.inputs, run.result)
             self._done_in(run.inputs, elapsed)
+            self._remember(run)
         if not self.HOLD:
             memory.give_back()
 
+    def _remember(self, run):
+        key = self._key(run.inputs) if self.KEEP else None
+        if key is None:
+            return
+        kind = [k for k in REMEMBERED if k[0] == self.KIND and k != (self.KIND, key)]
+        for old in kind[:max(0, len(kind) + 1 - self.KEEP)]:
+            del REMEMBERED[old]
+        REMEMBERED.pop((self.KIND, key), None)
+        REMEMBERED[(self.KIND, key)] = (self._kept(run), datetime.datetime.now())
+
     # ---- what subclasses may adjust
+
+    def _key(self, inputs):
+        """A hashable key of inputs whose result is remembered (KEEP), or None: the same key must
+        mean the same result."""
+
+    def _kept(self, run):
+        """What is remembered of a completed run (`_recalled` gets it back)."""
+        return run.result
+
+    def _recalled(self, inputs, kept, when):
+        """Show a remembered result instead of computing it again."""
+        self._finish(inputs, kept)
+        self.param.update(progress=1.0, label="done", status=f"computed at {when:%H:%M:%S} by this server "
+                                                            "(the same inputs give the same result)")
 
     partial_interval = 0.0  # partial results are drawn at most once per this many seconds
 

@@ -48,6 +48,17 @@ def structure_preserving(method, theta):
     return METHODS[method].preserves_at(0.5 if theta is None else theta) == "symplectic"
 
 
+@pytest.fixture(autouse=True)
+def forget_remembered_results():
+    """Each test computes its own maps and long runs: the app's server-wide memory of results
+    (app.jobs.REMEMBERED) would show one test another's, with no lease and no progress."""
+    import sys
+
+    jobs = sys.modules.get("app.jobs")
+    if jobs is not None:
+        jobs.REMEMBERED.clear()
+
+
 @pytest.fixture
 def rng():
     return np.random.default_rng(20261121)

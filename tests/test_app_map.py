@@ -6,7 +6,7 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from app import memory
+from app import jobs, memory
 from app.features import stabilitymap as maps
 from app.features.stabilitymap import StabilityMap
 from app.study import Study, soft_range
@@ -207,6 +207,7 @@ def test_a_server_configured_with_a_dask_scheduler_computes_its_maps_there(monke
                 monkeypatch.delenv(maps.SCHEDULER_ENV, raising=False)
             else:
                 monkeypatch.setenv(maps.SCHEDULER_ENV, where)
+            jobs.REMEMBERED.clear()  # computed in both places, not recalled
             m = StabilityMap(Study(scene="modulated"), nx=6, ny=4)
             m.start()
             assert m.status.startswith("done"), m.status
@@ -218,3 +219,19 @@ def test_a_server_configured_with_a_dask_scheduler_computes_its_maps_there(monke
     assert there.status.tolist() == here.status.tolist()
     for k in here.plan.measures:
         assert np.array_equal(here.values[k], there.values[k], equal_nan=True), k
+
+
+def test_a_map_any_page_computed_is_shown_at_once_to_the_next_that_asks(tongue):
+    """Deterministic: the same plan gives the same map, so the server computes it once for a class
+    (app.jobs.REMEMBERED); another plan is computed."""
+    _, m = tongue
+    m.start()  # computed again (each test's memory of results starts empty), and remembered
+    other = StabilityMap(Study(scene="modulated"), nx=9, ny=5)
+    assert other.quick(), "a remembered map is shown in the handler that asks for it"
+    other.start()
+    assert other.run is None, "nothing computed"
+    assert other.result is m.result and other.status.startswith("computed at") and "by this server" in other.status
+    other.nx = 8
+    assert not other.quick()
+    other.start()
+    assert other.run is not None and other.status.startswith("done") and other.result.values[other.measure].shape == (8, 5)

@@ -502,6 +502,27 @@ def test_the_long_runs_default_horizon_reaches_its_end_on_every_scene_at_its_def
             assert lr.status.startswith("done"), (name, lr.status)
 
 
+def test_a_long_run_any_page_completed_is_shown_at_once_to_the_next_that_asks():
+    """The same scene, methods, values, h and horizon give the same envelopes: the server runs
+    them once (app.jobs.REMEMBERED), a run that stopped early included; another horizon runs."""
+    for T_long, ended in ((2000.0, "done: 20000 steps per method"), (1e4, "stopped early")):
+        first = longrun.LongRun(Study(scene="damped"), T_long=T_long)
+        first.start()
+        assert first.status.startswith(ended)
+        s = Study(scene="damped")
+        again = longrun.LongRun(s, T_long=T_long)
+        assert again.quick()
+        again.start()
+        assert again.run is None and again.data is first.data and again.progress == first.progress
+        assert again.status.startswith(ended) and "by this server" in again.status
+        if ended == "stopped early":
+            assert s.message.level == "warning" and "overflow" in s.message.text, "the failure is said again"
+    again.T_long = 3000.0
+    assert not again.quick()
+    again.start()
+    assert again.run is not None and again.status.startswith("done: 30000 steps")
+
+
 def test_long_run_refuses_a_horizon_over_the_cap():
     s = Study(scene="damped")
     lr = longrun.LongRun(s, T_long=1e8)

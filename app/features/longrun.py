@@ -62,6 +62,7 @@ class LongRun(Job):
 
     KIND = "long run"
     WHAT = "a long run"
+    KEEP = 4  # the envelopes are up to 2.2 MB a run
 
     def __init__(self, study, **params):
         params.setdefault("T_long", long_horizon(study.scene, study.T))
@@ -154,10 +155,29 @@ class LongRun(Job):
         self._steps_done = result[0]
 
     def _done_in(self, inputs, elapsed):
-        done, reached = self._steps_done, self.run.result[1]
+        self._ended(inputs, self.run.result, f"in {elapsed:.1f} s", f"after {elapsed:.1f} s")
+
+    def _ended(self, inputs, result, took, stopped):
+        done, reached = result
         self.progress = done / max(inputs[2], 1)
-        self.status = (f"done: {done} steps per method in {elapsed:.1f} s" if reached else
-                       f"stopped early (see the message) after {elapsed:.1f} s")
+        self.status = (f"done: {done} steps per method {took}" if reached else
+                       f"stopped early (see the message) {stopped}")
+
+    def _key(self, inputs):
+        setups, h, steps, values, scene = inputs
+        return scene, tuple((x.method.name, x.theta) for x in setups), tuple(sorted(values.items())), h, steps
+
+    def _kept(self, run):
+        return self.data, run.result
+
+    def _recalled(self, inputs, kept, when):
+        data, result = kept
+        with param.parameterized.batch_call_watchers(self):  # drawn once
+            self._started(inputs)
+            self._partial(inputs, data)
+            self._finish(inputs, result)
+            by = f"computed at {when:%H:%M:%S} by this server"
+            self._ended(inputs, result, f"({by})", f"({by})")
 
 
 # (title, value label, log axis, the envelope: (t, y) of a method's arrays)

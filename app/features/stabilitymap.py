@@ -91,6 +91,10 @@ class StabilityMap(Job):
     KIND = "stability map"
     WHAT = "this map"
     PREFIX = "stability map: "
+    KEEP = 16  # a map's result: its measure and status per cell (tens of kB)
+
+    def _key(self, plan):
+        return plan
 
     def __init__(self, study, **params):
         super().__init__(study=study, **params)
