@@ -179,7 +179,8 @@ class App(param.Parameterized):
         """Stop the page once its browser has been gone GONE_MS or more (seen gone twice in a row). Its
         session would be destroyed by the server's check for unused sessions, which stops it too, but
         not the first page's: Panel keeps that session for good, to write every later page's HTML
-        from (page.reuse_sessions), and its long run or measurement went on after its page had closed."""
+        from (Panel's reuse_sessions, app/warmup.py), and its long run or measurement went on after
+        its page had closed."""
         gone = self._closed()
         if gone and self._gone:
             self._doc.remove_periodic_callback(self._watcher)

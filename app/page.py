@@ -103,18 +103,10 @@ def adjust_panel():
         document._dispatch_msgs = no_stranded_messages(document._dispatch_msgs)
 
 
-def reuse_sessions():
-    """For this server process (the setup module's): a page's HTML comes from the first session's,
-    at once, and its own session is built meanwhile, while the browser loads the scripts (Panel's
-    `reuse_sessions = "warm"`): the page's request took 0.37-0.8 s, the time to build a session.
-    Every session's template is the same; what a link asks for is applied when its session is built."""
-    pn.config.reuse_sessions = "warm"
-
-
 def serve_locally():
     """The current session's stylesheets from this server: Panel takes their address from the page's
-    template variables, which a session built ahead of its page (reuse_sessions) never gets, and
-    then linked them from Panel's CDN."""
+    template variables, which a session built ahead of its page (Panel's warm `reuse_sessions`, set
+    by app/warmup.py) never gets, and then linked them from Panel's CDN."""
     doc = pn.state.curdoc
     if doc is not None and doc.session_context is not None:
         doc._template_variables.setdefault("dist_url", f"{pn.state.rel_path}/{LOCAL_DIST}" if pn.state.rel_path

@@ -67,7 +67,11 @@ if __name__ == "__main__":
 
     raise SystemExit(main(["compile"]))
 if __name__ == "panel_setup_module":
-    from app.page import reuse_sessions
+    import panel as pn
 
-    reuse_sessions()
+    # A page's HTML comes from the first session's, at once, and its own session is built meanwhile,
+    # while the browser loads the scripts: the page's request took 0.37-0.8 s, the time to build a
+    # session. Every session's template is the same; what a link asks for is applied when its session
+    # is built. (Set here, the server's setup: `panel serve` cannot import the app package yet.)
+    pn.config.reuse_sessions = "warm"
     print(f"cosymp app warm-up: ready in {prepare():.1f} s", flush=True)

@@ -19,6 +19,7 @@ ARTIFACTS = ROOT / "tests" / "artifacts"
 CHROMIUM = os.environ.get("COSYMP_CHROMIUM", "/usr/bin/chromium")
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
                  "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+PANEL = str(pathlib.Path(sys.executable).with_name("panel"))  # the command the environment installed
 START_TIMEOUT_S = 600  # a cold numba cache compiles every kernel first (1-3 min quiet, more under load)
 
 
@@ -35,10 +36,12 @@ def served(log_path, env=None, options=()):
     app itself would build a session)."""
     port = free_port()
     ARTIFACTS.mkdir(exist_ok=True)
-    path = [str(ROOT)] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join(path), **(env or {})}
+    env = {**os.environ, **(env or {})}
+    # Started as the README starts it: the environment's `panel` command, from the repository, with
+    # nothing added to the import path (`python -m panel` put the repository on it, and so hid a
+    # setup module that imported the app package, which `panel serve` cannot import).
     with open(log_path, "w") as log:
-        proc = subprocess.Popen([sys.executable, "-m", "panel", "serve", "app", "--setup", "app/warmup.py",
+        proc = subprocess.Popen([PANEL, "serve", "app", "--setup", "app/warmup.py",
                                  "--address", "127.0.0.1", "--port", str(port),
                                  "--allow-websocket-origin", f"127.0.0.1:{port}", "--liveness", *options],
                                 cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT)

@@ -307,9 +307,9 @@ def test_tabs_are_built_ahead_one_at_a_time_while_the_page_is_idle_and_start_no_
 
 
 def test_a_session_built_ahead_of_its_page_serves_its_stylesheets_locally():
-    """app/page.reuse_sessions and serve_locally: Panel builds a reused page's session without writing
-    its HTML, so nothing sets the template variable its stylesheet links are made from; serve_locally
-    sets it before any model is made. Only useful while Panel builds warm sessions this way and reads
+    """Panel's warm reuse_sessions (app/warmup.py) and serve_locally: Panel builds a reused page's
+    session without writing its HTML, so nothing sets the template variable its stylesheet links are
+    made from; serve_locally sets it before any model is made. Only useful while Panel builds warm sessions this way and reads
     that variable: when a release changes either, this says so."""
     import inspect
 

@@ -242,8 +242,8 @@ class LoopProbe(threading.Thread):
 
 class Sessions:
     """Counts the sessions Panel logs as launched and destroyed (PANEL_LOG_LEVEL=info). The first
-    session is never destroyed: Panel keeps it to write later pages' HTML from (app.page.reuse_sessions;
-    the app stops that page itself once its browser has gone, App._watch)."""
+    session is never destroyed: Panel keeps it to write later pages' HTML from (Panel's reuse_sessions,
+    set by app/warmup.py; the app stops that page itself once its browser has gone, App._watch)."""
 
     KEPT = 1
 
