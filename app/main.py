@@ -17,7 +17,7 @@ import param
 from cosymp.errors import InputError, RunError
 
 from .features import FEATURES
-from .jobs import Note
+from .jobs import Job, Note
 from .memory import log_when_freed, map_large_blocks
 from .page import SCRIPTS, Design, adjust_panel, serve_locally
 from .plotting import katex_fonts_css, push, rule
@@ -80,6 +80,9 @@ class App(param.Parameterized):
                 self._pending.append(Note("error", f"the link's {', '.join(bad)} could not be applied: showing the "
                                                    "defaults"))
         self.views = {f.name: f.view(self.study, self.states[f.name]) for f in FEATURES}
+        # Every computation of the page: the study's and the features' (a state is a Job or holds `jobs`).
+        self.jobs = [self.study, *(j for s in self.states.values()
+                                   for j in ([s] if isinstance(s, Job) else getattr(s, "jobs", ())))]
         names = [f.name for f in FEATURES]
         self.tabs = pn.Tabs(*[(f.label, pn.Column(sizing_mode="stretch_width")) for f in FEATURES],
                             active=names.index(self.study.view), sizing_mode="stretch_width")
@@ -199,7 +202,7 @@ class App(param.Parameterized):
         shapes)."""
         if self._stopped or self._closed():
             return
-        busy = self.study.running or any(getattr(s, "running", False) for s in self.states.values())
+        busy = any(j.running for j in self.jobs)
         todo = [f.name for f in FEATURES if f.ahead and f.name not in self._ahead_done]
         if todo and not busy and time.monotonic() - App.last_change >= AHEAD_IDLE_S:
             self._ahead_done.add(todo[0])
@@ -237,11 +240,12 @@ class App(param.Parameterized):
     def template(self):
         share = pn.widgets.Button(name="Copy link to this view", sizing_mode="stretch_width")
         share.js_on_click(code=COPY_LINK_JS)
-        busy = self.study.param.running
-        # Shown and hidden by its style only: a change of `visible` or of a component's classes makes
-        # BokehJS lay out the whole page (Panel's own busy indicator, off below, did that on every event).
+        # Spins while any computation of the page runs (the comparison, a tab's lesson, study, run or
+        # map): a tab still showing what it showed before a change says so. Shown and hidden by its style
+        # only: a change of `visible` or of a component's classes makes BokehJS lay out the whole page
+        # (Panel's own busy indicator, off below, did that on every event).
         spinner = pn.indicators.LoadingSpinner(value=True, size=24, styles=pn.bind(
-            lambda running: {"opacity": "1" if running else "0"}, busy))
+            lambda *running: {"opacity": "1" if any(running) else "0"}, *(j.param.running for j in self.jobs)))
         download = pn.widgets.FileDownload(callback=self._report, filename="cosymp-report.html",
                                            label="Download report (HTML)", button_type="primary",
                                            sizing_mode="stretch_width")

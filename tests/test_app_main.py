@@ -22,6 +22,25 @@ def test_the_page_has_every_view_and_follows_the_study():
     assert app.study.results is not None and all(e.comparison is not None for e in app.study.results.entries)
 
 
+def test_the_spinner_spins_while_any_computation_of_the_page_runs():
+    """Not only the comparison: a tab's lesson, study, run or map computing shows it too (a tab
+    showing what it showed before a change said nothing)."""
+    app = main.App()
+    page = app.template()
+    [spinner] = [o for obj in page.main for o in obj.select(pn.indicators.LoadingSpinner)]
+    assert spinner.styles == {"opacity": "0"}
+    kinds = {type(j).__name__ for j in app.jobs}
+    assert {"Study", "ThetaLesson", "LongRun", "StabilityMap", "WorkPrecision", "LongHorizons"} <= kinds, kinds
+    for job in app.jobs:
+        job.running = True
+        assert spinner.styles == {"opacity": "1"}, job
+        job.running = False
+        assert spinner.styles == {"opacity": "0"}, job
+    app.study.running = True
+    assert spinner.styles == {"opacity": "1"}
+    app._stop(None)
+
+
 def test_a_tab_is_built_when_first_shown_and_closing_the_page_releases_every_state():
     app = main.App()
     names = [f.name for f in FEATURES]

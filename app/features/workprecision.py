@@ -587,10 +587,11 @@ class Measurements:
     def __init__(self, study):
         self.measure = WorkPrecision(study)
         self.long = LongHorizons(study)
+        self.jobs = (self.measure, self.long)
 
     def release(self):
-        self.measure.release()
-        self.long.release()
+        for job in self.jobs:
+            job.release()
 
 
 # Not built ahead: its 700 models made every later change of the page slower (Bokeh walks the whole model
