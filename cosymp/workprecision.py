@@ -118,11 +118,10 @@ def reference(setup, T):
     scene = setup.scene
     if scene.has_flow:
         try:
-            exact = simulate(Setup.make(scene, "exact", setup.values), T, T)
-        except RunError:
-            raise RunError(f"{REFERENCE_SHORT} at T = {T:g}: the exact flow outgrows floating point; "
-                           "shorten T", T, 0) from None
-        return exact.z[-1, 0], "exact flow", 0.0
+            z, _ = _flow(Setup.make(scene, "exact", setup.values), None, None, 0.0, T, 0.01 * scene.time_scale)
+        except RunError as e:
+            raise RunError(_beyond("the exact flow", T, e.time) + ": shorten T", T, 0) from None
+        return z[0], "exact flow", 0.0
     steps = max(1, math.ceil(T / (0.01 * scene.time_scale)))
     if steps > MAX_STEPS:
         raise InputError(f"T = {T:g} is too long for a reference solution ({steps:.3g} steps of rk8 beyond the "
@@ -318,42 +317,63 @@ def _drift_reference(setup, h, counts, report, total):
     """Reference states at counts[i] * h as far as the reference reaches, their uncertainties,
     the reference's label and why it stopped short ('' if it did not)."""
     scene = setup.scene
-    refs = []
     if scene.has_flow:
         exact = Setup.make(scene, "exact", setup.values)
+        refs, z, pt, t = [], None, None, 0.0
         for N in counts:
             try:
-                refs.append(simulate(exact, N * h, N * h).z[-1, 0])
-            except RunError:
-                return refs, [0.0] * len(refs), "exact flow", _beyond("the exact flow", N * h)
+                z, pt = _flow(exact, z, pt, t, N * h, h)
+            except RunError as e:
+                return refs, [0.0] * len(refs), "exact flow", _beyond("the exact flow", N * h, e.time)
+            refs.append(z[0])
+            t = N * h
         return refs, [0.0] * len(refs), "exact flow", ""
     tick = partial(report, 0, total, "reference (rk8)")
     rk8 = Setup.make(scene, "rk8", setup.values)
     fine, failed = _checkpoints(rk8, h / 2, [2 * N for N in counts], tick)
     coarse, _ = _checkpoints(rk8, h, counts[:len(fine)], tick)
-    why = _beyond("the rk8 reference", counts[len(fine)] * h) if failed else ""
+    why = _beyond("the rk8 reference", counts[len(fine)] * h, failed.time) if failed else ""
     return fine, [relative_error(c, f)[0] for f, c in zip(fine, coarse)], "rk8 at h/2", why
 
 
-def _beyond(what, T):
-    return f"{REFERENCE_SHORT} at T = {T:g}: {what} outgrows floating point; choose smaller horizons"
+def _flow(exact, z, pt, t0, t1, shortest):
+    """(z, p_t) of the exact flow carried from t0 (z, pt; None: the scene's initial state) to t1
+    in one step, which is exact at any length; a step that fails is split in halves down to
+    `shortest`. A long step fails before the state does: the damped oscillator's coefficients
+    e^(±γ s) over a step of length s pass floating point at γ s = 709, while its state stays finite
+    to γ t = 1420 (a single step from 0 ended its reference at T = 5000 for γ = 0.2, which
+    reaches 7098). RunError where a step of `shortest` fails: there the state itself overflows."""
+    try:
+        run = simulate(exact, t1 - t0, t1 - t0, z0=z, pt0=pt, t0=t0)
+    except RunError:
+        if t1 - t0 <= shortest:
+            raise
+        middle = t0 + 0.5 * (t1 - t0)
+        z, pt = _flow(exact, z, pt, t0, middle, shortest)
+        return _flow(exact, z, pt, middle, t1, shortest)
+    return run.z[-1], run.pt[-1]
+
+
+def _beyond(what, T, t):
+    return (f"{REFERENCE_SHORT} at T = {T:g}: {what} leaves floating point at t ≈ {t:.4g} (|z| > 1.8e308), so no "
+            "error can be measured beyond it at these parameters")
 
 
 def _checkpoints(setup, h, counts, tick):
     """States at counts[i] steps of h, run in pieces of at most CHUNK steps (tick after each),
-    and whether the run failed before the last count."""
+    and the RunError that stopped it before the last count (None if it did not)."""
     z, pt, done, out = None, None, 0, []
     for N in counts:
         while done < N:
             n = min(CHUNK, N - done)
             try:
                 run = simulate(setup, h, n * h, z0=z, pt0=pt, t0=done * h, stride=n)
-            except RunError:
-                return out, True
+            except RunError as e:
+                return out, e
             z, pt, done = run.z[-1], run.pt[-1], done + n
             tick()
         out.append(z[0])
-    return out, False
+    return out, None
 
 
 def growth_exponent(rows, solver, key="error"):

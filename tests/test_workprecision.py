@@ -1,12 +1,15 @@
 """Work-precision and long-horizon measurements on tiny configurations."""
 import io
 import math
+import re
 
 import numpy as np
 import pytest
 
 from cosymp import workprecision as wp
 from cosymp.cli import main
+from cosymp.errors import RunError
+from cosymp.integrate import Setup
 from cosymp.progress import Bar
 
 HS = [0.4, 0.2, 0.1, 0.05]
@@ -201,12 +204,23 @@ def test_growth_exponent_stops_where_the_error_saturates():
 
 
 def test_drift_beyond_the_reference_is_a_nan_row():
-    """The damped oscillator at gamma = 0.2: its exact flow overflows before T = 5000."""
-    rows = wp.drift("damped", ["midpoint"], h=0.1, horizons=[100.0, 5000.0])
-    reached, beyond = rows
-    assert reached["status"] == "ok" and reached["error"] < 1.0
-    assert beyond["status"].startswith(wp.REFERENCE_SHORT) and "T = 5000" in beyond["status"]
+    """The damped oscillator at gamma = 0.2: its state passes 1.8e308 at t = 7098 (the hard case
+    'Damped beyond floating point'), so the reference reaches T = 5000 (q ~ 1e217; one exact step
+    from 0 overflowed there) and stops before 1e4, saying where."""
+    rows = wp.drift("damped", ["midpoint"], h=0.1, horizons=[100.0, 5000.0, 1e4])
+    reached, far, beyond = rows
+    assert reached["status"] == far["status"] == "ok" and reached["error"] < 1.0 and math.isfinite(far["error"])
+    assert beyond["status"].startswith(wp.REFERENCE_SHORT) and "T = 10000" in beyond["status"]
+    assert 7090 < float(re.search(r"t ≈ (\S+)", beyond["status"]).group(1)) < 7110
     assert math.isnan(beyond["error"])
+
+
+def test_the_work_precision_reference_reaches_where_the_state_does():
+    setup = Setup.make("damped", "midpoint")
+    z, label, _ = wp.reference(setup, 5000.0)
+    assert label == "exact flow" and 1e216 < abs(z[0]) < 1e218
+    with pytest.raises(RunError, match="leaves floating point at t ≈ 7098"):
+        wp.reference(setup, 8000.0)
 
 
 def test_drift_reports_every_chunk_so_cancel_is_prompt():
