@@ -249,6 +249,11 @@ def _report(args, out, err):
     out.write(f"report written to {args.out} ({size / 1e6:.2f} MB)\n")
 
 
+def _num(x, spec):
+    """x formatted to spec, or '–' in its width where it is not a number (never reached, failed)."""
+    return format(x, spec) if math.isfinite(x) else "–".rjust(int(spec.split(".")[0]))
+
+
 def _cost_table(rows):
     from .workprecision import targets
 
@@ -263,9 +268,10 @@ def _cost_table(rows):
         ok = [r for r in mine if r["error"] == r["error"]]
         best = min(ok, key=lambda r: r["error"]) if ok else None
         lines.append(f"{solver:18s} {len(mine):4d} {len(mine) - len(ok):6d} "
-                     f"{best['error'] if best else math.nan:10.2e} {c6:10.2e} {t['cost'][1e-9][solver]:10.2e} "
-                     f"{max((r['H_ext_max_abs'] for r in ok), default=math.nan):9.1e} "
-                     f"{max((r['det_max_dev'] for r in ok), default=math.nan):11.1e}")
+                     f"{_num(best['error'] if best else math.nan, '10.2e')} {_num(c6, '10.2e')} "
+                     f"{_num(t['cost'][1e-9][solver], '10.2e')} "
+                     f"{_num(max((r['H_ext_max_abs'] for r in ok), default=math.nan), '9.1e')} "
+                     f"{_num(max((r['det_max_dev'] for r in ok), default=math.nan), '11.1e')}")
     for e, r in t["ratios"].items():
         if r["fastest"] is None:
             lines.append(f"at error {e:.0e}: no cosymp method got there (use smaller steps: --max-steps)")
@@ -280,7 +286,7 @@ def _cost_table(rows):
 
 
 def _drift_table(rows):
-    from .workprecision import growth_exponent
+    from .workprecision import ROUNDOFF, growth_text
 
     horizons = sorted({r["T"] for r in rows})
     shown = [T for T in horizons if abs(math.log10(T) - round(math.log10(T))) < 1e-6] or horizons
@@ -288,17 +294,19 @@ def _drift_table(rows):
     lines = [(f"{first['scene']}: relative error at T and max |H + p_t| up to T, one step size per method; "
               f"reference: {first['reference']}"),
              f"{'solver':18s} {'h':>7s} " + " ".join(f"{f'err T={T:g}':>11s}" for T in shown)
-             + f" {'err slope':>9s} {'max|H~|':>9s} {'H~ slope':>8s}"]
+             + f" {'err slope':>9s} {'max|H~|':>9s} {'H~ slope':>9s}"]
     for solver in dict.fromkeys(r["solver"] for r in rows):
         mine = {r["T"]: r for r in rows if r["solver"] == solver}
         last = mine[horizons[-1]]
-        lines.append(f"{solver:18s} {last['h']:7.3g} " + " ".join(f"{mine[T]['error']:11.2e}" for T in shown)
-                     + f" {growth_exponent(rows, solver):9.2f} {last['H_ext_max_abs']:9.1e} "
-                     f"{growth_exponent(rows, solver, 'H_ext_max_abs'):8.2f}")
+        lines.append(f"{solver:18s} {last['h']:7.3g} " + " ".join(_num(mine[T]["error"], "11.2e") for T in shown)
+                     + f" {growth_text(rows, solver):>9s} {_num(last['H_ext_max_abs'], '9.1e')} "
+                     f"{growth_text(rows, solver, 'H_ext_max_abs'):>9s}")
         if last["status"] != "ok":
             lines.append(f"  {solver}: {last['status']}")
     lines.append("slope: fitted exponent of T over the horizons where the error is below 0.1 (1 = linear growth, "
-                 "2 = quadratic); nan: fewer than 3 such horizons")
+                 "2 = quadratic); –: fewer than 3 such horizons; round-off: every value within "
+                 f"{ROUNDOFF:g} eps |H| sqrt(N) after N steps (the relative error: {ROUNDOFF:g} eps sqrt(N)), the "
+                 "rounding of N steps, not the method")
     return "\n".join(lines) + "\n"
 
 

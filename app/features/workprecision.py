@@ -244,6 +244,8 @@ class LongHorizons(Measurement):
     and a note says so."""
 
     h = param.Number(default=0.1, label="Step h", doc="The step of every method (default: the scene's).")
+    capped = param.String(default="", doc="Why the rows shown stop before the largest horizon asked for ('' if "
+                                          "they do not), said beside them.")
     T_max = param.Selector(default=1e4, objects={f"{T:.0e}": T for T in DRIFT_TOPS}, label="Largest horizon",
                            doc="The horizons are 1e2, 2e2, 5e2, 1e3, ... up to this one.")
     KIND = "long horizons"
@@ -261,6 +263,10 @@ class LongHorizons(Measurement):
         self.drop()
         self.param.methods.objects = applicable(self.study.scene, METHODS)
         self.param.update(self._defaults())
+
+    def drop(self):
+        self.capped = ""
+        super().drop()
 
     def _inputs(self):
         s = self.study
@@ -283,12 +289,19 @@ class LongHorizons(Measurement):
                         theta=job.method_theta, progress=run.report)
 
     def _finish(self, job, rows):
+        """The rows, and where the reference stopped short of the largest horizon, why and how to
+        reach it, on the page beside them (a toast points there)."""
         short = [r for r in rows if r["status"].startswith(wp.REFERENCE_SHORT)]
+        capped = ""
         if short:
             top = max((r["T"] for r in rows if not r["status"].startswith(wp.REFERENCE_SHORT)), default=0.0)
+            why = short[0]["status"].split(": ", 1)[1]
+            capped = (f"Shown up to T = {top:g}, not to the {job.horizons[-1]:g} asked for: {why}; or choose a "
+                      "smaller largest horizon.")
             job = dataclasses.replace(job, horizons=tuple(T for T in job.horizons if T <= top * (1 + 1e-9)))
-            self.say(Note("warning", f"long horizons shown up to T = {top:g} only: {short[0]['status']}"))
+            self.say(Note("warning", f"long horizons shown up to T = {top:g} only: the reason is beside them"))
             rows = [r for r in rows if r not in short]
+        self.capped = capped
         super()._finish(job, rows)
 
 
@@ -404,9 +417,8 @@ class DriftPlot:
         curves = {}
         for solver in dict.fromkeys(r["solver"] for r in rows):
             mine = [r for r in pts if r["solver"] == solver]
-            g = wp.growth_exponent(rows, solver, key)
-            slope = f"{g:.2f}".replace("-0.00", "0.00") if finite(g) else "–"
-            curves[f"{solver}: slope {slope}"] = (
+            text = wp.growth_text(rows, solver, key)
+            curves[f"{solver}: " + ("at round-off" if text == "round-off" else f"slope {text}")] = (
                 [r["T"] for r in mine], [r[key] for r in mine], False, solver)
         self.curves.set(curves)
         self.dots.data = {"x": np.array([r["T"] for r in pts]), "y": np.array([r[key] for r in pts]),
@@ -445,7 +457,10 @@ TARGETS_TEXT = ("<p class='doc'>Time to reach an error: the wall time at which a
 GROWTH_TEXT = ("<p class='doc'>Growth exponent: the slope of log(error) against log(T), fitted over the horizons "
                "before the error first reaches 0.1 (where it saturates at the orbit's size) and where it is above "
                "ten times the reference's uncertainty, and the slope of log(max |H~|); 1 is linear growth, 2 "
-               "quadratic, 0 bounded; – with fewer than three usable horizons. Grey: the slopes T and T² for "
+               "quadratic, 0 bounded; – with fewer than three usable horizons; <b>round-off</b> where every value "
+               f"fitted is at round-off level: max |H~| within {wp.ROUNDOFF:g} ε |H| √N after N steps (the rounding of "
+               f"N steps adds up to about ε |H| √N; ε = 2.2e-16), the relative error within {wp.ROUNDOFF:g} ε √N. "
+               "The slope of such values measures the rounding, not the method. Grey: the slopes T and T² for "
                "comparison.</p>")
 WP_TEXT = ("<p>What each method costs for the accuracy it delivers, on the sidebar's scene, parameters and θ, to "
            "the horizon T set here (the scene's paper horizon at first): "
@@ -495,9 +510,8 @@ def growth_table(rows):
     cols = {"method": [], "order": [], "preserves": [], "error ∝ T^": [], "max |H~| ∝ T^": []}
     for s in dict.fromkeys(r["solver"] for r in rows):
         first = next(r for r in rows if r["solver"] == s)
-        g = [wp.growth_exponent(rows, s, key) for key in DRIFT_KEYS]
-        for k, v in zip(cols, (s, str(first["order"]), str(first["preserves"]), *[f"{x:.2f}" if finite(x) else "–"
-                                                                                 for x in g])):
+        for k, v in zip(cols, (s, str(first["order"]), str(first["preserves"]),
+                               *[wp.growth_text(rows, s, key) for key in DRIFT_KEYS])):
             cols[k].append(v)
     return cols
 
@@ -534,7 +548,7 @@ class WorkPrecisionView(FeatureView):
         self.drift_plots = [DriftPlot(key, title) for key, title in
                             (("error", "relative error at T, at fixed h"), ("H_ext_max_abs", "max |H~| up to T, at fixed h"))]
         self.wp_hint = note("<p class='doc'>Nothing measured yet: press Start.</p>")
-        self.wp_failed, self.long_failed = note(""), note("")
+        self.wp_failed, self.long_failed, self.long_capped = note(""), note(""), note("")
         self.wp_reference, self.long_reference = note(""), note("")
         self.targets, self.growth = table(["time to reach"]), table(["method"])
         self.wp_box = pn.Column(*[pane(p.fig) for p in self.wp_plots], self.wp_reference, note(TARGETS_TEXT),
@@ -542,7 +556,7 @@ class WorkPrecisionView(FeatureView):
         self.long_box = pn.Column(*[pane(p.fig) for p in self.drift_plots], self.long_reference, note(GROWTH_TEXT),
                                   self.growth, visible=False, **wide)
         self.follow(m, "rows", "running")
-        self.follow(lh, "rows")
+        self.follow(lh, "rows", "capped")
         return pn.Column(
             note(WP_TEXT.format(steps=f"{WP_MAX_STEPS:,}")),
             pn.Row(pn.widgets.MultiChoice.from_param(m.param.methods, name="Methods", **wide),
@@ -554,7 +568,7 @@ class WorkPrecisionView(FeatureView):
             pn.Row(pn.widgets.MultiChoice.from_param(lh.param.methods, name="Methods", **wide),
                    pn.widgets.FloatInput.from_param(lh.param.h, format="0.[000000]", width=140),
                    pn.widgets.Select.from_param(lh.param.T_max, width=140), **wide),
-            long_row, long_status, self.long_failed, self.long_box,
+            long_row, long_status, self.long_capped, self.long_failed, self.long_box,
             **wide)
 
     def wanted(self):
@@ -569,6 +583,7 @@ class WorkPrecisionView(FeatureView):
         self.long_box.visible = bool(lh.rows)
         self.wp_failed.object = failed_html(m.rows)
         self.long_failed.object = failed_html(lh.rows, lambda r: f"T = {r['T']:g}")
+        self.long_capped.object = f"<p class='caveat'>{html.escape(lh.capped)}</p>" if lh.capped else ""
         if m.rows:
             for p in self.wp_plots:
                 p.set(m.rows)
