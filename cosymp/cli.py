@@ -215,38 +215,70 @@ def _writable(path, suffixes, option, what):
 
 
 def _report(args, out, err):
+    """A report: its input checked, then the kernels it needs that the cache lacks compiled with a
+    line per unit, then computed with a line per stage on stderr (a bar on a terminal): on a cold
+    cache the paper report otherwise printed nothing for minutes."""
+    from . import warm
     from .integrate import Setup, check_step, get_scene
     from .methods import method
-    from .progress import Bar
+    from .progress import for_stream
+    from .reference import check_reference
     from .report import write
 
     _writable(args.out, (".html", ".htm"), "-o", "an .html file")
-    bar = Bar(err)
+    if args.target == "paper":
+        from .report.paper import kernels, paper_report
+
+        keys = [k for scene, methods in kernels(not args.no_work_precision).items()
+                for k in warm.unit_keys(scene, methods)]
+    else:
+        from .report.scene import command, scene_report
+
+        scene = get_scene(args.target)
+        values = dict(args.set)
+        setups = [Setup.make(scene, m, values, args.theta if method(m).takes_theta else None)
+                  for m in (args.method, args.vs)]
+        h = scene.h if args.h is None else args.h
+        T = scene.T if args.T is None else args.T
+        check_reference(setups[0], check_step(h, T) * h)
+        keys = warm.unit_keys(scene.name, [s.method.name for s in setups] + ["exact" if scene.has_flow else "rk8"])
+    _compile_first(keys, err)
+    progress = for_stream(err)
     try:
         if args.target == "paper":
-            from .report.paper import paper_report
-
             cmd = " ".join(["cosymp report paper"] + ["--quick"] * args.quick
                            + ["--no-work-precision"] * args.no_work_precision + ["-o", shlex.quote(args.out)])
-            report = paper_report(bar, long=not args.quick, work_precision=not args.no_work_precision, command=cmd)
+            report = paper_report(progress, long=not args.quick, work_precision=not args.no_work_precision,
+                                  command=cmd)
         else:
-            from .report.scene import command, scene_report
-
-            scene = get_scene(args.target)
-            values = dict(args.set)
-            setups = [Setup.make(scene, m, values, args.theta if method(m).takes_theta else None)
-                      for m in (args.method, args.vs)]
-            h = scene.h if args.h is None else args.h
-            T = scene.T if args.T is None else args.T
-            check_step(h, T)
-            report = scene_report(setups, h, T, command(setups, h, T, args.out), progress=bar)
+            report = scene_report(setups, h, T, command(setups, h, T, args.out), progress=progress)
     finally:
-        bar.close()
+        progress.close()
     try:
         size = write(report, args.out)
     except OSError as e:
         raise InputError(f"cannot write {args.out}: {e.strerror}; choose another file") from None
     out.write(f"report written to {args.out} ({size / 1e6:.2f} MB)\n")
+
+
+def _compile_first(keys, err):
+    """Compile the kernel units with these keys that the cache lacks, in one process per core, a
+    line on stderr for each; CosympError if one fails."""
+    from . import warm
+
+    def say(line):
+        err.write(f"cosymp: {line}\n")
+        err.flush()
+
+    compiler = warm.compile_missing(keys, report=say)
+    if compiler is not None and compiler.failed:
+        raise _compile_failure(compiler)
+
+
+def _compile_failure(compiler):
+    key, why = next(iter(compiler.failed.items()))
+    return CosympError(f"{len(compiler.failed)} of {compiler.total} groups of kernels failed to compile, e.g. {key}: "
+                       f"{why}")
 
 
 def _num(x, spec):
@@ -328,9 +360,7 @@ def _compile(args, out):
     if not compiler.total:
         report("every kernel is in the cache")
     elif compiler.failed:
-        key, why = next(iter(compiler.failed.items()))
-        raise CosympError(f"{len(compiler.failed)} of {compiler.total} groups of kernels failed to compile, "
-                          f"e.g. {key}: {why}")
+        raise _compile_failure(compiler)
     else:
         report(f"done in {time.perf_counter() - compiler.started:.1f} s")
 

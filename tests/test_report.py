@@ -141,6 +141,63 @@ def test_bad_report_input_is_one_line():
         assert says in err.getvalue() and err.getvalue().count("\n") == 1
 
 
+def test_a_report_says_what_it_compiles_and_computes_on_stderr(tmp_path, monkeypatch):
+    """On a cold cache the paper report printed nothing for minutes: the kernels it needs and the cache
+    lacks (here two units said to be missing, one it does not need) are compiled with a line each,
+    then a line per stage; stdout keeps its one line."""
+    from cosymp import warm
+
+    units = {u.key: u for u in warm.units()}
+    monkeypatch.setattr(warm, "missing", lambda: [units["decaying/Theta"], units["kapitza/Gauss"]])
+    path = tmp_path / "decaying.html"
+    out, err = io.StringIO(), io.StringIO()
+    assert main(["report", "decaying", "-o", str(path)], out, err) == 0, err.getvalue()
+    assert out.getvalue() == f"report written to {path} ({path.stat().st_size / 1e6:.2f} MB)\n"
+    lines = err.getvalue().splitlines()
+    assert lines[0].startswith("cosymp: compiling 1 groups of kernels") and "decaying × Theta" in lines[0]
+    assert "[  1/1]" in lines[1] and "compiled decaying × Theta" in lines[1]
+    assert [line.split("] ", 1)[1] for line in lines[2:]] == [
+        "midpoint: run and diagnostics", "midpoint: reference", "rk4: run and diagnostics", "rk4: reference", "done"]
+
+
+def test_a_kernel_that_fails_to_compile_is_one_line_and_exit_3(monkeypatch):
+    from cosymp import warm
+
+    bad = warm.Unit("nowhere/Family", "nowhere", ("none",))
+    monkeypatch.setattr(warm, "missing", lambda: [bad])
+    monkeypatch.setattr(warm, "unit_keys", lambda scene, methods: [bad.key])
+    out, err = io.StringIO(), io.StringIO()
+    assert main(["report", "decaying", "-o", "x.html"], out, err) == 3
+    last = err.getvalue().splitlines()[-1]
+    assert last.startswith("cosymp: 1 of 1 groups of kernels failed to compile, e.g. nowhere/Family")
+    assert "Traceback" not in err.getvalue() and out.getvalue() == ""
+
+
+def test_the_paper_reports_kernels_are_compiled_ahead(monkeypatch):
+    """Every setup the paper report runs (its sections, and the work-precision runs on a tiny
+    horizon) is in a unit that `cosymp report paper` compiles first."""
+    from cosymp import warm
+    from cosymp import workprecision as wp
+    from cosymp.integrate import Setup
+    from cosymp.report.paper import WP_METHODS, kernels, paper_report
+
+    made = set()
+    make = Setup.make.__func__
+
+    def recording(cls, *args, **kwargs):
+        setup = make(cls, *args, **kwargs)
+        made.add(warm.key_of(setup))
+        return setup
+
+    monkeypatch.setattr(Setup, "make", classmethod(recording))
+    paper_report(long=False, work_precision=False)
+    for name in ("damped", "modulated"):
+        wp.measure(name, WP_METHODS, T=1.0, hs=[0.5], peers=True, rtols=[1e-3], budget=0.0)
+    ahead = {k for scene, methods in kernels().items() for k in warm.unit_keys(scene, methods)}
+    assert made <= ahead, made - ahead
+    assert {k for scene, methods in kernels(work_precision=False).items() for k in warm.unit_keys(scene, methods)} < ahead
+
+
 def test_app_report_uses_the_views_runs():
     from app.study import Study, study_report
 

@@ -10,7 +10,7 @@ from cosymp import workprecision as wp
 from cosymp.cli import main
 from cosymp.errors import RunError
 from cosymp.integrate import Setup
-from cosymp.progress import Bar
+from cosymp.progress import Bar, Lines, for_stream
 
 HS = [0.4, 0.2, 0.1, 0.05]
 
@@ -207,6 +207,21 @@ def test_progress_bar_draws_on_a_terminal():
     quiet = io.StringIO()
     Bar(quiet)(1, 2)
     assert quiet.getvalue() == ""
+
+
+def test_progress_off_a_terminal_is_a_line_per_stage():
+    """A log gets a line when a stage begins, and within one at most a line per `every` seconds."""
+    stream = io.StringIO()
+    lines = for_stream(stream)
+    assert isinstance(lines, Lines)
+    lines.every = 3600.0
+    for done, label in ((0, "reference"), (0, "rk4 h = 0.1"), (1, "midpoint h = 0.1"), (1, "midpoint h = 0.05")):
+        lines(done, 2, label)
+    lines.every = 0.0
+    lines(1, 2, "midpoint h = 0.025")
+    lines.close()
+    said = [line.split("s  ", 1)[1] for line in stream.getvalue().splitlines()]
+    assert said == ["[0/2 done] reference", "[1/2 done] midpoint h = 0.1", "[1/2 done] midpoint h = 0.025"]
 
 
 def test_growth_exponent_stops_where_the_error_saturates():

@@ -25,6 +25,21 @@ WP_METHODS = ("rk4", "rk8", "midpoint", "symplectic-euler", "gauss4", "gauss6", 
 GAUGE_QUANTITIES = (("x", "q", 0), ("y", "q", 1), ("p_x", "p", 0), ("p_y", "p", 1), ("Π_x", "Pi", 0), ("Π_y", "Pi", 1))
 
 
+def kernels(work_precision=True):
+    """{scene: the methods its runs use}, for compiling their kernels ahead (cosymp.warm): the
+    scheme and RK4 on each oscillator with its exact flow, the scheme in every gauge, and the
+    work-precision methods with their reference (the exact flow, or scipy checked against rk8)."""
+    out = {}
+    for s in SCENES.values():
+        if s.paper is None:
+            continue
+        methods = [SCHEME] if s.has_gauges else [SCHEME, REFERENCE]
+        if work_precision and not s.has_gauges:
+            methods += [m for m in WP_METHODS if METHODS[m].refusal(s) is None] + ["rk8"]
+        out[s.name] = methods + (["exact"] if s.has_flow else [])
+    return out
+
+
 def paper_report(progress=None, long=True, work_precision=True, command="cosymp report paper -o paper.html"):
     """The report; `long=False` and `work_precision=False` leave out the long runs and the
     work-precision diagram (each a Section saying so) for a quick look."""
