@@ -53,13 +53,20 @@ def test_the_plots_draw_every_finite_point_and_the_targets_table_names_the_ratio
     curves = plot.curves.source.data
     items = plot.curves.legend.items
     assert [item.index for item in items] == list(range(len(curves["xs"]))), "the legend lists exactly the lines"
-    assert all(item.renderers == [plot.curves.lines] for item in items)
+    assert all(item.renderers == [plot.curves.lines, plot.curves.marks] for item in items)
+    keys = plot.curves.keys.data
+    assert np.isnan(keys["x"]).all() and len(keys["x"]) == len(items), "a legend marker per line, drawn nowhere"
+    assert dict(zip([item.label.value for item in items], keys["marker"])) == {
+        "rk4": "triangle", "theta(0.3)": "circle", "scipy-RK45": "square", "scipy-DOP853": "square",
+        "scipy-LSODA": "square"}
     assert plot.curves.lines in plot.fig.renderers, "the lines are the figure's own, built with it"
     styles = {item.label.value: curves["dash"][item.index] for item in items}
     assert styles["rk4"] == "solid" and styles["scipy-DOP853"] == "dashed"
     points = plot.points.data
     assert len(points["x"]) == len(views.wp_points(m.rows, "error")) == sum(len(x) for x in curves["xs"])
-    assert set(points["marker"]) == {"circle", "square"}
+    assert {(r, m) for r, m in zip(points["solver"], points["marker"])} == {
+        ("rk4", "triangle"), ("theta(0.3)", "circle"), ("scipy-RK45", "square"), ("scipy-DOP853", "square"),
+        ("scipy-LSODA", "square")}, "each point in its family's marker"
     assert set(points) == set(views.POINT_COLUMNS) == set(views.WorkPrecisionPlot("error", "", None).points.data), \
         "the glyph's columns exist before the first data (else 'nonexistent field' console warnings)"
     n_renderers = len(plot.fig.renderers)

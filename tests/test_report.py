@@ -14,7 +14,7 @@ import pytest
 from cosymp.cli import main
 from cosymp.methods import METHODS
 from cosymp.report import Figure, Report, Section, Series, envelope, render
-from cosymp.report.style import METHOD_COLORS, MIN_DISTANCE
+from cosymp.report.style import FAMILY_MARKERS, METHOD_COLORS, MIN_DISTANCE, method_marker
 from cosymp.scenes import SCENES
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -225,13 +225,79 @@ def cie_lab(color):
     return 116 * fy - 16, 500 * (fx - fy), 200 * (fy - fz)
 
 
-def test_every_method_has_a_colour_far_from_every_other_methods():
-    """A work-precision plot shows every method at once: symplectic Euler, Boris and Gauss 4 were
-    three teals and greens, the compositions two violets (CIE76 distances 14-22)."""
+def ciede2000(lab1, lab2):
+    """The CIEDE2000 colour difference of two CIE L*a*b* colours (Sharma, Wu and Dalal, 2005)."""
+    (L1, a1, b1), (L2, a2, b2) = lab1, lab2
+    C = (math.hypot(a1, b1) + math.hypot(a2, b2)) / 2
+    G = 0.5 * (1 - math.sqrt(C ** 7 / (C ** 7 + 25 ** 7)))
+    a1, a2 = (1 + G) * a1, (1 + G) * a2
+    C1, C2 = math.hypot(a1, b1), math.hypot(a2, b2)
+    h1, h2 = (math.degrees(math.atan2(b, a)) % 360 if c else 0.0 for a, b, c in ((a1, b1, C1), (a2, b2, C2)))
+    dh = 0.0 if C1 * C2 == 0 else (h2 - h1 + 180) % 360 - 180
+    dH = 2 * math.sqrt(C1 * C2) * math.sin(math.radians(dh / 2))
+    L, Cm = (L1 + L2) / 2, (C1 + C2) / 2
+    if C1 * C2 == 0:
+        h = h1 + h2
+    elif abs(h1 - h2) <= 180:
+        h = (h1 + h2) / 2
+    else:
+        h = (h1 + h2 + 360) / 2 if h1 + h2 < 360 else (h1 + h2 - 360) / 2
+    T = (1 - 0.17 * math.cos(math.radians(h - 30)) + 0.24 * math.cos(math.radians(2 * h))
+         + 0.32 * math.cos(math.radians(3 * h + 6)) - 0.20 * math.cos(math.radians(4 * h - 63)))
+    SL = 1 + 0.015 * (L - 50) ** 2 / math.sqrt(20 + (L - 50) ** 2)
+    SC, SH = 1 + 0.045 * Cm, 1 + 0.015 * Cm * T
+    RT = (-math.sin(math.radians(60 * math.exp(-(((h - 275) / 25) ** 2))))
+          * 2 * math.sqrt(Cm ** 7 / (Cm ** 7 + 25 ** 7)))
+    dL, dC = (L2 - L1) / SL, (C2 - C1) / SC
+    return math.sqrt(dL ** 2 + dC ** 2 + (dH / SH) ** 2 + RT * dC * dH / SH)
+
+
+def distance(a, b):
+    return ciede2000(cie_lab(a), cie_lab(b))
+
+
+def sharing_a_plot():
+    """The pairs of methods whose colours can share a plot: every two methods that apply to one
+    scene (its work-precision plot shows them all, with scipy's solvers), the exact flow with any
+    of them (a comparison pairs it with any method; never with scipy's, it is their reference)."""
+    peers = [m for m in METHOD_COLORS if m.startswith("scipy-")]
+    pairs = set()
+    for scene in SCENES.values():
+        applies = [m for m in METHODS if METHODS[m].refusal(scene) is None]
+        pairs |= {frozenset(p) for p in itertools.combinations([m for m in applies if m != "exact"] + peers, 2)}
+        pairs |= {frozenset(("exact", m)) for m in applies if m != "exact"}
+    return pairs
+
+
+def test_every_method_has_a_colour_far_from_every_method_it_can_share_a_plot_with():
+    """CIEDE2000, not CIE76: the previous palette kept every CIE76 distance above 25, and yet rk4
+    and composition6 read as one red, symplectic-euler and leapfrog as one teal, gauss4 and boris as
+    one green, composition4 and blanes-moan6 as one violet in a work-precision plot; their CIEDE2000
+    distances, 11 to 20.5, are all below MIN_DISTANCE."""
     assert set(METHODS) <= set(METHOD_COLORS)
     assert cie_lab("#ffffff") == pytest.approx((100, 0, 0), abs=0.05)
-    assert math.dist(cie_lab("#ff0000"), cie_lab("#000000")) == pytest.approx(117.3, abs=0.2)  # known value
-    distances = {(a, b): math.dist(cie_lab(METHOD_COLORS[a]), cie_lab(METHOD_COLORS[b]))
-                 for a, b in itertools.combinations(METHOD_COLORS, 2)}
-    close = {pair: round(d) for pair, d in distances.items() if d < MIN_DISTANCE}
+    for lab1, lab2, known in (((50, 2.6772, -79.7751), (50, 0, -82.7485), 2.0425),  # Sharma et al., pairs 1, 7, 17, 25
+                              ((50, 0, 0), (50, -1, 2), 2.3669), ((50, 2.5, 0), (73, 25, -18), 27.1492),
+                              ((60.2574, -34.0099, 36.2677), (60.4626, -34.1751, 39.4387), 1.2644)):
+        assert ciede2000(lab1, lab2) == pytest.approx(known, abs=1e-4)
+    alike = {("rk4", "composition6"): ("#e03131", "#d6336c"), ("symplectic-euler", "leapfrog"): ("#15aabf", "#00c6a4"),
+             ("gauss4", "boris"): ("#2b8a3e", "#5c940d"), ("composition4", "blanes-moan6"): ("#9775fa", "#bb88cc")}
+    for pair, (a, b) in alike.items():
+        assert math.dist(cie_lab(a), cie_lab(b)) > 25 and distance(a, b) < MIN_DISTANCE, pair
+    pairs = sharing_a_plot()
+    assert frozenset(("boris", "leapfrog")) not in pairs and frozenset(("boris", "gauss4")) in pairs
+    close = {tuple(sorted(p)): round(distance(*(METHOD_COLORS[m] for m in p)), 1) for p in pairs
+             if distance(*(METHOD_COLORS[m] for m in p)) < MIN_DISTANCE}
     assert not close, close
+
+
+def test_every_family_has_a_marker_of_its_own():
+    """Each family of methods (the kernel family of its data) and scipy's solvers have their own
+    marker, the same for every member, in the app's work-precision plots and the paper report's."""
+    families = {}
+    for m in METHODS:
+        families.setdefault(type(METHODS[m].data()).__name__, set()).add(method_marker(m))
+    assert all(len(markers) == 1 for markers in families.values()), families
+    shapes = [next(iter(markers)) for markers in families.values()] + [method_marker("scipy-DOP853")]
+    assert len(set(shapes)) == len(shapes) == len(FAMILY_MARKERS)
+    assert method_marker("theta(0.3)") == method_marker("midpoint") == "circle" and method_marker("rk4") == "triangle"

@@ -17,7 +17,7 @@ from cosymp import workprecision as wp
 from cosymp.errors import InputError
 from cosymp.integrate import Setup, check_step
 from cosymp.methods import METHODS
-from cosymp.report.style import method_color
+from cosymp.report.style import method_color, method_marker
 from cosymp.scenes import SCENES
 
 from ..jobs import Job, Note
@@ -33,6 +33,7 @@ DRIFT_TOPS = (1e3, 1e4, 1e5, 1e6)
 DRIFT_DEFAULT_STEPS = 1_000_000
 MEASURE_BYTES = 96 * MB  # measured peak: work-precision 43 MB, long horizons 29 MB
 HEIGHT = 340
+MARKER_SIZE = 8  # points in the solver's family's marker (cosymp.report.style)
 KEEP = 16  # measurements this server remembers (MEASURED)
 WP_KEYS = {"error": "relative error at T", "H_ext_max_abs": "max |H~| over the run"}
 DRIFT_KEYS = {"error": "relative error at T", "H_ext_max_abs": "max |H~| up to T"}
@@ -332,7 +333,8 @@ class Curves:
     the plot: the rows of one multi-line renderer built with the figure (a renderer added to a figure
     already on the page drew its line as a streak in the left margin; a pool of 24 line renderers per
     plot, used before, made the tab's four plots 0.7 s of the server's time to build), each legend
-    item showing its row."""
+    item showing its row and its solver's marker (a point per row of a scatter renderer built with
+    it, at no position, so that it draws nothing in the plot)."""
 
     def __init__(self, fig):
         self.fig = fig
@@ -340,17 +342,24 @@ class Curves:
         self.source.data = {"xs": [], "ys": [], "color": [], "dash": []}
         self.lines = fig.multi_line("xs", "ys", source=self.source, line_color="color", line_dash="dash",
                                     line_width=1.5)
+        self.keys = source()
+        self.keys.data = {"x": [], "y": [], "color": [], "marker": []}
+        self.marks = fig.scatter("x", "y", source=self.keys, color="color", marker="marker", size=MARKER_SIZE)
         self.legend = legend_outside(fig, [])  # built with the figure: one added later has no view
 
     def set(self, curves):
         """curves: {label: (x, y, dashed, solver)} drawn in the solver's colour; the legend lists
-        them."""
+        them with the solver's marker."""
         rows = list(curves.values())
         self.source.data = {"xs": [np.asarray(x, float) for x, _, _, _ in rows],
                             "ys": [np.asarray(y, float) for _, y, _, _ in rows],
                             "color": [method_color(solver) for _, _, _, solver in rows],
                             "dash": ["dashed" if dashed else "solid" for _, _, dashed, _ in rows]}
-        self.legend.items = [LegendItem(label=label, renderers=[self.lines], index=k) for k, label in enumerate(curves)]
+        self.keys.data = {"x": np.full(len(rows), np.nan), "y": np.full(len(rows), np.nan),
+                          "color": [method_color(solver) for _, _, _, solver in rows],
+                          "marker": [method_marker(solver) for _, _, _, solver in rows]}
+        self.legend.items = [LegendItem(label=label, renderers=[self.lines, self.marks], index=k)
+                             for k, label in enumerate(curves)]
 
 
 POINT_COLUMNS = ("x", "y", "solver", "run", "steps", "error_text", "wall_text", "H_text", "det_text", "color",
@@ -369,7 +378,7 @@ class WorkPrecisionPlot:
         # Every column the glyph and the hover read exists from the start (a missing one logged
         # "nonexistent field" warnings in the console before the first data).
         self.points.data = {k: [] for k in POINT_COLUMNS}
-        dots = self.fig.scatter("x", "y", source=self.points, size=7, color="color", marker="marker",
+        dots = self.fig.scatter("x", "y", source=self.points, size=MARKER_SIZE, color="color", marker="marker",
                                 nonselection_alpha=1.0)
         self.fig.add_tools(HoverTool(renderers=[dots], tooltips=HOVER), TapTool(renderers=[dots]))
         self.rows = []
@@ -391,7 +400,7 @@ class WorkPrecisionPlot:
             "steps": [str(r["steps"]) for r in pts], "error_text": [_sci(r["error"]) for r in pts],
             "wall_text": [_sci(r["wall_s"], " s") for r in pts], "H_text": [_sci(r["H_ext_max_abs"]) for r in pts],
             "det_text": [_sci(r["det_max_dev"]) for r in pts], "color": [method_color(r["solver"]) for r in pts],
-            "marker": ["square" if r["kind"] == "scipy" else "circle" for r in pts]}
+            "marker": [method_marker(r["solver"]) for r in pts]}
 
 
 class DriftPlot:
@@ -404,8 +413,8 @@ class DriftPlot:
         self.fig = figure(title, "horizon T", DRIFT_KEYS[key], logx=True, logy=True, height=HEIGHT)
         self.curves = Curves(self.fig)
         self.dots = source()
-        self.dots.data = {"x": [], "y": [], "color": []}
-        self.fig.scatter("x", "y", source=self.dots, size=6, color="color")
+        self.dots.data = {"x": [], "y": [], "color": [], "marker": []}
+        self.fig.scatter("x", "y", source=self.dots, size=MARKER_SIZE, color="color", marker="marker")
         self.guides = {p: source() for p in (1, 2)}
         for p, src in self.guides.items():
             self.fig.line("x", "y", source=src, line_color="#868e96", line_width=2,
@@ -422,7 +431,8 @@ class DriftPlot:
                 [r["T"] for r in mine], [r[key] for r in mine], False, solver)
         self.curves.set(curves)
         self.dots.data = {"x": np.array([r["T"] for r in pts]), "y": np.array([r[key] for r in pts]),
-                          "color": [method_color(r["solver"]) for r in pts]}
+                          "color": [method_color(r["solver"]) for r in pts],
+                          "marker": [method_marker(r["solver"]) for r in pts]}
         guides = {1: ([], []), 2: ([], [])}
         if pts:
             T0 = min(r["T"] for r in pts)

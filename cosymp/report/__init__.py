@@ -23,7 +23,8 @@ MAX_POINTS = 4000
 
 @dataclass
 class Series:
-    """One curve: label, x and y (NaN breaks the line), drawn dashed and/or with markers."""
+    """One curve: label, x and y (NaN breaks the line), drawn dashed and/or with markers of a shape
+    (style.FAMILY_MARKERS' names)."""
 
     label: str
     x: np.ndarray
@@ -31,6 +32,7 @@ class Series:
     dash: bool = False
     points: bool = False
     color: str = None
+    marker: str = "circle"
 
 
 @dataclass
@@ -105,7 +107,7 @@ def _figure_json(fig, key):
         ok = np.isfinite(x) & ((x > 0) | (not fig.logx))
         x, y = x[ok], y[ok]
         order = np.arange(len(x)) if fig.parametric else np.argsort(x, kind="stable")
-        style = json.dumps({"label": s.label, "dash": s.dash, "points": s.points,
+        style = json.dumps({"label": s.label, "dash": s.dash, "points": s.points, "marker": s.marker,
                             "color": s.color or PALETTE[i % len(PALETTE)]}, ensure_ascii=False)
         series.append(f'{style[:-1]},"x":{_array(x[order])},"y":{_array(y[order])}}}')
     head = {"id": key, "title": fig.title, "xlabel": fig.xlabel, "ylabel": fig.ylabel, "logx": fig.logx,
