@@ -45,10 +45,10 @@ def test_text_is_escaped_and_data_cannot_close_the_script():
     assert spec[0]["series"][0]["label"] == "</script><b>" and spec[0]["series"][0]["y"] == [1, None]
 
 
-def open_offline(path, shot, interact=False):
+def open_offline(path, shot, interact=False, js=None):
     """Open a report from disk with the network blocked; returns (requests other than the file,
     console errors, plots drawn, and when asked the second plot's hover readout and its x range
-    before and after dragging a zoom box)."""
+    before and after dragging a zoom box, and what the script js evaluates to)."""
     playwright = pytest.importorskip("playwright.sync_api")
     if not Path(CHROMIUM).exists():
         pytest.skip(f"no Chromium at {CHROMIUM}")
@@ -79,6 +79,8 @@ def open_offline(path, shot, interact=False):
             page.mouse.move(box["x"] + 0.6 * box["width"], box["y"] + 0.7 * box["height"], steps=5)
             page.mouse.up()
             answers["zoom"] = (before, page.evaluate("[cosympPlots[1].scales.x.min, cosympPlots[1].scales.x.max]"))
+        if js:
+            answers["js"] = page.evaluate(js)
         ARTIFACTS.mkdir(exist_ok=True)
         page.screenshot(path=str(ARTIFACTS / shot), full_page=True)
         browser.close()
@@ -98,6 +100,25 @@ def test_scene_report_from_the_command_line(tmp_path):
     assert answers["hover"] not in ("", "–")
     (x0, x1), (y0, y1) = answers["zoom"]
     assert x0 < y0 < y1 < x1
+
+
+MARKS_JS = """() => Object.fromEntries(cosympPlots[0].series.slice(1).map((s, i) => {
+    const u = cosympPlots[0], x = u.data[i + 1][0][0], y = u.data[i + 1][1][0];
+    return [s.label, Array.from(u.ctx.getImageData(Math.round(u.valToPos(x, "x", true)),
+                                                   Math.round(u.valToPos(y, "y", true)), 1, 1).data).slice(0, 3)];
+}))"""
+
+
+def test_markers_are_drawn_in_a_parametric_plot(tmp_path):
+    """A work-precision plot is parametric: uPlot gave its point painter no points, so no marker was
+    drawn. Two single points (a line of one point draws nothing), a square and a triangle."""
+    path = tmp_path / "marks.html"
+    series = [Series("a", [0.0], [0.0], points=True, color="#ff0000", marker="square"),
+              Series("b", [1.0], [1.0], points=True, color="#0000ff", marker="triangle")]
+    path.write_text(render(Report("marks", [], [Section("s", [], [Figure("f", "x", "y", series, parametric=True)])])))
+    _, errors, drawn, answers = open_offline(path, "report-marks.png", js=MARKS_JS)
+    assert errors == [] and drawn == 1
+    assert answers["js"] == {"a": [255, 0, 0], "b": [0, 0, 255]}
 
 
 def test_the_quick_paper_report_has_every_section():
