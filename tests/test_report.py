@@ -121,6 +121,29 @@ def test_markers_are_drawn_in_a_parametric_plot(tmp_path):
     assert answers["js"] == {"a": [255, 0, 0], "b": [0, 0, 255]}
 
 
+ORDER_JS = """() => cosympPlots.map(u => ({
+    drawn: u.series.slice(1).map(s => [s.label, s.dash ? "dashed" : "solid"]),
+    legend: Array.from(u.root.querySelectorAll(".u-legend .u-series")).map(r => r.textContent.replace(/[:–]/g, ""))
+        .filter(t => t && t !== "t")}))"""
+
+
+def test_the_report_draws_the_first_method_over_the_second(tmp_path):
+    """As the app does: the first method (A) solid and translucent on top of the second (B), dashed
+    (RK4 hid midpoint's whole phase portrait); the legends list A first."""
+    path = tmp_path / "modulated.html"
+    out, err = io.StringIO(), io.StringIO()
+    assert main(["report", "modulated", "--method", "midpoint", "--vs", "rk4", "--T", "20", "-o", str(path)],
+                out, err) == 0, err.getvalue()
+    spec = json.loads(re.search(r'id="figures" type="application/json">(.*?)</script>', path.read_text(),
+                                re.DOTALL).group(1).replace("<\\/", "</"))
+    assert all([s["alpha"] for s in f["series"]] == [0.7, 1.0] for f in spec)
+    requests, errors, drawn, answers = open_offline(path, "report-order.png", js=ORDER_JS)
+    assert requests == [] and errors == [] and drawn == len(spec) == len(answers["js"])
+    for plot in answers["js"]:
+        assert plot["drawn"] == [["rk4", "dashed"], ["midpoint", "solid"]], "uPlot draws the last on top"
+        assert plot["legend"] == ["midpoint", "rk4"]
+
+
 def test_the_quick_paper_report_has_every_section():
     """The paper report without its long runs and work-precision diagram (the slow tier renders
     and opens the whole one)."""

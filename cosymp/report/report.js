@@ -179,17 +179,27 @@
     }}};
   }
 
+  /* uPlot draws its series in order, the last on top, and lists them in its legend in that order:
+     the figure's series are given to it last to first, so that the first (the first method) is
+     drawn over the others, and the legend's rows are put back in the figure's order. */
+  function legendInOrder(u, n) {
+    var rows = u.root.querySelectorAll(".u-legend .u-series");
+    for (var k = n - 1; k >= 0; k--) rows[rows.length - 1].parentNode.appendChild(rows[rows.length - n + k]);
+  }
+
   var plots = window.cosympPlots = [];
   specs.forEach(function (spec) {
     var el = document.getElementById(spec.id);
-    var pairs = spec.series.map(function (s) {
+    var drawn = spec.series.slice().reverse();
+    var pairs = drawn.map(function (s) {
       return [spec.logx ? log10(s.x) : s.x, spec.logy ? log10(s.y) : s.y];
     });
     var data = spec.parametric ? [null].concat(pairs) : uPlot.join(pairs);
     var series = [spec.parametric ? {} : {label: spec.xlabel, value: readout(spec.logx)}];
-    spec.series.forEach(function (s) {
+    drawn.forEach(function (s) {
+      var alpha = Math.round(255 * (s.alpha == null ? 1 : s.alpha)).toString(16).padStart(2, "0");
       var one = {
-        label: s.label, stroke: s.color, width: 1.5, spanGaps: true, dash: s.dash ? [6, 4] : undefined,
+        label: s.label, stroke: s.color + alpha, width: 1.5, spanGaps: true, dash: s.dash ? [6, 4] : undefined,
         points: {show: s.points, size: 5, fill: s.color, paths: marker(s.marker)}, value: readout(spec.logy)
       };
       if (spec.parametric) {
@@ -199,13 +209,15 @@
       series.push(one);
     });
     var width = Math.max(320, Math.min(el.parentNode.clientWidth || 900, 1100));
-    plots.push(new uPlot({
+    var plot = new uPlot({
       mode: spec.parametric ? 2 : 1, title: spec.title, width: width, height: 340, series: series, plugins: [panZoom()],
       scales: {x: {time: false}, y: {range: padded}},
       axes: [axis(spec.xlabel, spec.logx, false), axis(spec.ylabel, spec.logy, true)],
       cursor: {drag: {x: true, y: true, uni: 20}},
       legend: {live: !spec.parametric}
-    }, data, el));
+    }, data, el);
+    legendInOrder(plot, drawn.length);
+    plots.push(plot);
   });
   document.body.setAttribute("data-plots", String(specs.length));
 })();
