@@ -17,7 +17,7 @@ from cosymp import workprecision as wp
 from cosymp.errors import InputError
 from cosymp.integrate import Setup, check_step
 from cosymp.methods import METHODS
-from cosymp.report.style import method_color, method_marker
+from cosymp.report.style import METHOD_COLORS, OTHER, method_color, method_marker
 from cosymp.scenes import SCENES
 
 from ..jobs import Job, Note
@@ -333,8 +333,13 @@ class Curves:
     the plot: the rows of one multi-line renderer built with the figure (a renderer added to a figure
     already on the page drew its line as a streak in the left margin; a pool of 24 line renderers per
     plot, used before, made the tab's four plots 0.7 s of the server's time to build), each legend
-    item showing its row and its solver's marker (a point per row of a scatter renderer built with
-    it, at no position, so that it draws nothing in the plot)."""
+    item showing its row and its solver's marker: a point per row of a scatter renderer built with
+    it, at no position, so that it draws nothing in the plot, and KEYS of them at least (BokehJS
+    sets a scatter's new data asynchronously, and a legend that drew a new row before it was set
+    read past the end of the old data: "Offset is outside the bounds of the DataView", when the
+    long horizons were first shown)."""
+
+    KEYS = len(METHOD_COLORS)  # more than the solvers of any plot
 
     def __init__(self, fig):
         self.fig = fig
@@ -343,9 +348,15 @@ class Curves:
         self.lines = fig.multi_line("xs", "ys", source=self.source, line_color="color", line_dash="dash",
                                     line_width=1.5)
         self.keys = source()
-        self.keys.data = {"x": [], "y": [], "color": [], "marker": []}
+        self.keys.data = self._keys([])
         self.marks = fig.scatter("x", "y", source=self.keys, color="color", marker="marker", size=MARKER_SIZE)
         self.legend = legend_outside(fig, [])  # built with the figure: one added later has no view
+
+    def _keys(self, solvers):
+        n = max(self.KEYS, len(solvers))
+        return {"x": np.full(n, np.nan), "y": np.full(n, np.nan),
+                "color": [method_color(s) for s in solvers] + [OTHER] * (n - len(solvers)),
+                "marker": [method_marker(s) for s in solvers] + ["circle"] * (n - len(solvers))}
 
     def set(self, curves):
         """curves: {label: (x, y, dashed, solver)} drawn in the solver's colour; the legend lists
@@ -355,9 +366,7 @@ class Curves:
                             "ys": [np.asarray(y, float) for _, y, _, _ in rows],
                             "color": [method_color(solver) for _, _, _, solver in rows],
                             "dash": ["dashed" if dashed else "solid" for _, _, dashed, _ in rows]}
-        self.keys.data = {"x": np.full(len(rows), np.nan), "y": np.full(len(rows), np.nan),
-                          "color": [method_color(solver) for _, _, _, solver in rows],
-                          "marker": [method_marker(solver) for _, _, _, solver in rows]}
+        self.keys.data = self._keys([solver for _, _, _, solver in rows])
         self.legend.items = [LegendItem(label=label, renderers=[self.lines, self.marks], index=k)
                              for k, label in enumerate(curves)]
 
