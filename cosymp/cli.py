@@ -215,38 +215,75 @@ def _writable(path, suffixes, option, what):
 
 
 def _report(args, out, err):
+    """A report: its input checked, then the kernels it needs that the cache lacks compiled with a
+    line per unit, then computed with a line per stage on stderr (a bar on a terminal): on a cold
+    cache the paper report otherwise printed nothing for minutes."""
+    from . import warm
     from .integrate import Setup, check_step, get_scene
     from .methods import method
-    from .progress import Bar
+    from .progress import for_stream
+    from .reference import check_reference
     from .report import write
 
     _writable(args.out, (".html", ".htm"), "-o", "an .html file")
-    bar = Bar(err)
+    if args.target == "paper":
+        from .report.paper import kernels, paper_report
+
+        keys = [k for scene, methods in kernels(not args.no_work_precision).items()
+                for k in warm.unit_keys(scene, methods)]
+    else:
+        from .report.scene import command, scene_report
+
+        scene = get_scene(args.target)
+        values = dict(args.set)
+        setups = [Setup.make(scene, m, values, args.theta if method(m).takes_theta else None)
+                  for m in (args.method, args.vs)]
+        h = scene.h if args.h is None else args.h
+        T = scene.T if args.T is None else args.T
+        check_reference(setups[0], check_step(h, T) * h)
+        keys = warm.unit_keys(scene.name, [s.method.name for s in setups] + ["exact" if scene.has_flow else "rk8"])
+    _compile_first(keys, err)
+    progress = for_stream(err)
     try:
         if args.target == "paper":
-            from .report.paper import paper_report
-
             cmd = " ".join(["cosymp report paper"] + ["--quick"] * args.quick
                            + ["--no-work-precision"] * args.no_work_precision + ["-o", shlex.quote(args.out)])
-            report = paper_report(bar, long=not args.quick, work_precision=not args.no_work_precision, command=cmd)
+            report = paper_report(progress, long=not args.quick, work_precision=not args.no_work_precision,
+                                  command=cmd)
         else:
-            from .report.scene import command, scene_report
-
-            scene = get_scene(args.target)
-            values = dict(args.set)
-            setups = [Setup.make(scene, m, values, args.theta if method(m).takes_theta else None)
-                      for m in (args.method, args.vs)]
-            h = scene.h if args.h is None else args.h
-            T = scene.T if args.T is None else args.T
-            check_step(h, T)
-            report = scene_report(setups, h, T, command(setups, h, T, args.out), progress=bar)
+            report = scene_report(setups, h, T, command(setups, h, T, args.out), progress=progress)
     finally:
-        bar.close()
+        progress.close()
     try:
         size = write(report, args.out)
     except OSError as e:
         raise InputError(f"cannot write {args.out}: {e.strerror}; choose another file") from None
     out.write(f"report written to {args.out} ({size / 1e6:.2f} MB)\n")
+
+
+def _compile_first(keys, err):
+    """Compile the kernel units with these keys that the cache lacks, in one process per core, a
+    line on stderr for each; CosympError if one fails."""
+    from . import warm
+
+    def say(line):
+        err.write(f"cosymp: {line}\n")
+        err.flush()
+
+    compiler = warm.compile_missing(keys, report=say)
+    if compiler is not None and compiler.failed:
+        raise _compile_failure(compiler)
+
+
+def _compile_failure(compiler):
+    key, why = next(iter(compiler.failed.items()))
+    return CosympError(f"{len(compiler.failed)} of {compiler.total} groups of kernels failed to compile, e.g. {key}: "
+                       f"{why}")
+
+
+def _num(x, spec):
+    """x formatted to spec, or '–' in its width where it is not a number (never reached, failed)."""
+    return format(x, spec) if math.isfinite(x) else "–".rjust(int(spec.split(".")[0]))
 
 
 def _cost_table(rows):
@@ -263,9 +300,10 @@ def _cost_table(rows):
         ok = [r for r in mine if r["error"] == r["error"]]
         best = min(ok, key=lambda r: r["error"]) if ok else None
         lines.append(f"{solver:18s} {len(mine):4d} {len(mine) - len(ok):6d} "
-                     f"{best['error'] if best else math.nan:10.2e} {c6:10.2e} {t['cost'][1e-9][solver]:10.2e} "
-                     f"{max((r['H_ext_max_abs'] for r in ok), default=math.nan):9.1e} "
-                     f"{max((r['det_max_dev'] for r in ok), default=math.nan):11.1e}")
+                     f"{_num(best['error'] if best else math.nan, '10.2e')} {_num(c6, '10.2e')} "
+                     f"{_num(t['cost'][1e-9][solver], '10.2e')} "
+                     f"{_num(max((r['H_ext_max_abs'] for r in ok), default=math.nan), '9.1e')} "
+                     f"{_num(max((r['det_max_dev'] for r in ok), default=math.nan), '11.1e')}")
     for e, r in t["ratios"].items():
         if r["fastest"] is None:
             lines.append(f"at error {e:.0e}: no cosymp method got there (use smaller steps: --max-steps)")
@@ -280,7 +318,7 @@ def _cost_table(rows):
 
 
 def _drift_table(rows):
-    from .workprecision import growth_exponent
+    from .workprecision import ROUNDOFF, growth_text
 
     horizons = sorted({r["T"] for r in rows})
     shown = [T for T in horizons if abs(math.log10(T) - round(math.log10(T))) < 1e-6] or horizons
@@ -288,17 +326,19 @@ def _drift_table(rows):
     lines = [(f"{first['scene']}: relative error at T and max |H + p_t| up to T, one step size per method; "
               f"reference: {first['reference']}"),
              f"{'solver':18s} {'h':>7s} " + " ".join(f"{f'err T={T:g}':>11s}" for T in shown)
-             + f" {'err slope':>9s} {'max|H~|':>9s} {'H~ slope':>8s}"]
+             + f" {'err slope':>9s} {'max|H~|':>9s} {'H~ slope':>9s}"]
     for solver in dict.fromkeys(r["solver"] for r in rows):
         mine = {r["T"]: r for r in rows if r["solver"] == solver}
         last = mine[horizons[-1]]
-        lines.append(f"{solver:18s} {last['h']:7.3g} " + " ".join(f"{mine[T]['error']:11.2e}" for T in shown)
-                     + f" {growth_exponent(rows, solver):9.2f} {last['H_ext_max_abs']:9.1e} "
-                     f"{growth_exponent(rows, solver, 'H_ext_max_abs'):8.2f}")
+        lines.append(f"{solver:18s} {last['h']:7.3g} " + " ".join(_num(mine[T]["error"], "11.2e") for T in shown)
+                     + f" {growth_text(rows, solver):>9s} {_num(last['H_ext_max_abs'], '9.1e')} "
+                     f"{growth_text(rows, solver, 'H_ext_max_abs'):>9s}")
         if last["status"] != "ok":
             lines.append(f"  {solver}: {last['status']}")
     lines.append("slope: fitted exponent of T over the horizons where the error is below 0.1 (1 = linear growth, "
-                 "2 = quadratic); nan: fewer than 3 such horizons")
+                 "2 = quadratic); –: fewer than 3 such horizons; round-off: every value within "
+                 f"{ROUNDOFF:g} eps |H| sqrt(N) after N steps (the relative error: {ROUNDOFF:g} eps sqrt(N)), the "
+                 "rounding of N steps, not the method")
     return "\n".join(lines) + "\n"
 
 
@@ -320,9 +360,7 @@ def _compile(args, out):
     if not compiler.total:
         report("every kernel is in the cache")
     elif compiler.failed:
-        key, why = next(iter(compiler.failed.items()))
-        raise CosympError(f"{len(compiler.failed)} of {compiler.total} groups of kernels failed to compile, "
-                          f"e.g. {key}: {why}")
+        raise _compile_failure(compiler)
     else:
         report(f"done in {time.perf_counter() - compiler.started:.1f} s")
 

@@ -1,6 +1,7 @@
-"""A one-line progress bar on the terminal (stderr), drawn only when it is a terminal."""
+"""Progress on stderr: a one-line bar drawn only on a terminal (`Bar`), or lines for a log (`Lines`)."""
 import shutil
 import sys
+import time
 
 
 class Bar:
@@ -28,3 +29,32 @@ class Bar:
             self.stream.write("\n")
             self.stream.flush()
             self.drawn = False
+
+
+class Lines:
+    """Callable as progress(done, total, label), for a stream that is not a terminal (a log, a CI
+    job, a pipe), where a bar is not drawn: a line when a stage begins (`done` changes) and the
+    latest label at most every `every` seconds within it, each with the seconds since the start."""
+
+    def __init__(self, stream=None, every=10.0, prefix="cosymp: "):
+        self.stream = stream or sys.stderr
+        self.every = every
+        self.prefix = prefix
+        self.started = self.last = time.perf_counter()
+        self.done = None
+
+    def __call__(self, done, total, label=""):
+        now = time.perf_counter()
+        if done == self.done and now - self.last < self.every:
+            return
+        self.done, self.last = done, now
+        self.stream.write(f"{self.prefix}{now - self.started:6.1f} s  [{done}/{total} done] {label}\n")
+        self.stream.flush()
+
+    def close(self):
+        """Nothing to end: every line is complete."""
+
+
+def for_stream(stream):
+    """A Bar on a terminal, else Lines."""
+    return Bar(stream) if stream.isatty() else Lines(stream)

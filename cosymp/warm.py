@@ -102,6 +102,14 @@ def key_of(setup):
     return f"{setup.scene.name}/{type(setup.data).__name__}"
 
 
+def unit_keys(scene, methods):
+    """The keys of the units that runs of these methods on the scene (a name) need, with the
+    common unit's (building a setup of some scenes compiles; nothing is compiled here)."""
+    from .methods import METHODS
+
+    return [COMMON] + list(dict.fromkeys(f"{scene}/{type(METHODS[m].data()).__name__}" for m in methods))
+
+
 def units():
     """The common unit, then one unit per (scene, family), in registry order."""
     from .scenes import SCENES
@@ -261,6 +269,17 @@ def compile_all(processes=None, report=None):
     compiler = Compiler(missing(), processes, report=report)
     compiler.join()
     missing()
+    return compiler
+
+
+def compile_missing(keys, processes=None, report=None):
+    """Compile the units with these keys that are not in the cache yet, in worker processes (one per
+    core), reporting each; returns the Compiler once they are done, None if none was missing."""
+    todo = [u for u in missing() if u.key in keys]
+    if not todo:
+        return None
+    compiler = Compiler(todo, processes, report=report)
+    compiler.join()
     return compiler
 
 

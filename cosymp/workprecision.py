@@ -17,6 +17,8 @@ Definitions (also the CSV's):
   for implicit methods on linear scenes the stage evaluations of the time coefficients (one
   linear solve per step), NaN where a Newton iteration makes it run-dependent (nonlinear scenes).
 - H_ext_max_abs: max |H + p_t| over every step (cosymp) or every accepted step (peers).
+- H_scale (drift): the largest |H| at the start and at the horizons so far, the scale of the
+  rounding in H + p_t (see `at_roundoff`).
 - det_max_dev: max |det M_k - 1| of the one-step tangent maps over every step, or over
   DIAG_MAPS evenly spaced steps for longer runs; NaN for peers (no step map to differentiate).
 """
@@ -43,7 +45,7 @@ ROW_FIELDS = ("scene", "solver", "kind", "order", "preserves", "h", "rtol", "T",
               "wall_s", "error", "error_abs", "H_ext_max_abs", "det_max_dev", "reference",
               "reference_uncertainty", "status")
 DRIFT_FIELDS = ("scene", "solver", "order", "preserves", "h", "T", "steps", "error", "error_abs",
-                "H_ext_abs", "H_ext_max_abs", "reference", "reference_uncertainty", "status")
+                "H_ext_abs", "H_ext_max_abs", "H_scale", "reference", "reference_uncertainty", "status")
 PEERS = ("RK45", "DOP853", "LSODA")
 PEER_RTOLS = tuple(10.0 ** -k for k in range(3, 14))
 # The splitting family by its cheapest and its best member: with all five a plot held 17 curves
@@ -58,6 +60,8 @@ REFERENCE_RTOL = 3e-14
 MAX_REPEATS = 50
 ERROR_FLOOR = 1e-13
 STEP_GROWTH = math.sqrt(2.0)
+ROUNDOFF = 10.0
+"""A value is at round-off level within ROUNDOFF ε scale √steps (see `at_roundoff`)."""
 
 
 def _setups(scene, methods, values, theta):
@@ -118,11 +122,10 @@ def reference(setup, T):
     scene = setup.scene
     if scene.has_flow:
         try:
-            exact = simulate(Setup.make(scene, "exact", setup.values), T, T)
-        except RunError:
-            raise RunError(f"{REFERENCE_SHORT} at T = {T:g}: the exact flow outgrows floating point; "
-                           "shorten T", T, 0) from None
-        return exact.z[-1, 0], "exact flow", 0.0
+            z, _ = _flow(Setup.make(scene, "exact", setup.values), None, None, 0.0, T, 0.01 * scene.time_scale)
+        except RunError as e:
+            raise RunError(_beyond("the exact flow", T, e.time, T) + ", or a shorter T", T, 0) from None
+        return z[0], "exact flow", 0.0
     steps = max(1, math.ceil(T / (0.01 * scene.time_scale)))
     if steps > MAX_STEPS:
         raise InputError(f"T = {T:g} is too long for a reference solution ({steps:.3g} steps of rk8 beyond the "
@@ -289,6 +292,9 @@ def drift(scene, methods=DRIFT_METHODS, values=None, h=None, horizons=None, thet
         tick = partial(report, i + total - len(setups), total, where)
         tick()
         z, pt, done, H_max = None, None, 0, 0.0
+        H = np.empty((1, 1))
+        energies(s.P, np.array([0.0]), s.start[None], H)
+        scale = abs(H[0, 0])
         failure = ""
         for k, (T, N) in enumerate(zip(horizons, counts)):
             row = dict.fromkeys(DRIFT_FIELDS, math.nan)
@@ -305,10 +311,11 @@ def drift(scene, methods=DRIFT_METHODS, values=None, h=None, horizons=None, thet
                 else:
                     z, pt, done = sc.z[None], np.array([sc.pt]), N
                     H_max = max(H_max, sc.H_ext_max_abs)
-                    H = np.empty((1, 1))
                     energies(s.P, np.array([N * h]), z[None], H)
+                    scale = max(scale, abs(H[0, 0]))
                     row["error"], row["error_abs"] = relative_error(z[0], refs[k])
-                    row.update(H_ext_abs=abs(H[0, 0] + pt[0]), H_ext_max_abs=H_max, reference_uncertainty=unc[k])
+                    row.update(H_ext_abs=abs(H[0, 0] + pt[0]), H_ext_max_abs=H_max, H_scale=scale,
+                               reference_uncertainty=unc[k])
             rows.append(row)
     report(total, total, "done")
     return rows
@@ -318,60 +325,119 @@ def _drift_reference(setup, h, counts, report, total):
     """Reference states at counts[i] * h as far as the reference reaches, their uncertainties,
     the reference's label and why it stopped short ('' if it did not)."""
     scene = setup.scene
-    refs = []
     if scene.has_flow:
         exact = Setup.make(scene, "exact", setup.values)
+        refs, z, pt, t = [], None, None, 0.0
         for N in counts:
             try:
-                refs.append(simulate(exact, N * h, N * h).z[-1, 0])
-            except RunError:
-                return refs, [0.0] * len(refs), "exact flow", _beyond("the exact flow", N * h)
+                z, pt = _flow(exact, z, pt, t, N * h, h)
+            except RunError as e:
+                return refs, [0.0] * len(refs), "exact flow", _beyond("the exact flow", N * h, e.time, counts[-1] * h)
+            refs.append(z[0])
+            t = N * h
         return refs, [0.0] * len(refs), "exact flow", ""
     tick = partial(report, 0, total, "reference (rk8)")
     rk8 = Setup.make(scene, "rk8", setup.values)
     fine, failed = _checkpoints(rk8, h / 2, [2 * N for N in counts], tick)
     coarse, _ = _checkpoints(rk8, h, counts[:len(fine)], tick)
-    why = _beyond("the rk8 reference", counts[len(fine)] * h) if failed else ""
+    why = _beyond("the rk8 reference", counts[len(fine)] * h, failed.time, counts[-1] * h) if failed else ""
     return fine, [relative_error(c, f)[0] for f, c in zip(fine, coarse)], "rk8 at h/2", why
 
 
-def _beyond(what, T):
-    return f"{REFERENCE_SHORT} at T = {T:g}: {what} outgrows floating point; choose smaller horizons"
+def _flow(exact, z, pt, t0, t1, shortest):
+    """(z, p_t) of the exact flow carried from t0 (z, pt; None: the scene's initial state) to t1
+    in one step, which is exact at any length; a step that fails is split in halves down to
+    `shortest`. A long step fails before the state does: the damped oscillator's coefficients
+    e^(±γ s) over a step of length s pass floating point at γ s = 709, while its state stays finite
+    to γ t = 1420 (a single step from 0 ended its reference at T = 5000 for γ = 0.2, which
+    reaches 7098). RunError where a step of `shortest` fails: there the state itself overflows."""
+    try:
+        run = simulate(exact, t1 - t0, t1 - t0, z0=z, pt0=pt, t0=t0)
+    except RunError:
+        if t1 - t0 <= shortest:
+            raise
+        middle = t0 + 0.5 * (t1 - t0)
+        z, pt = _flow(exact, z, pt, t0, middle, shortest)
+        return _flow(exact, z, pt, middle, t1, shortest)
+    return run.z[-1], run.pt[-1]
+
+
+def _beyond(what, T, t, top):
+    """Why the reference stops before T: where the state left floating point, and how much more
+    slowly it must grow to reach `top`, the largest horizon asked for (a state that passes 1e308
+    grows exponentially: log |z| grows in proportion to t)."""
+    return (f"{REFERENCE_SHORT} at T = {T:g}: {what} leaves floating point at t ≈ {t:.4g} (|z| > 1.8e308), so no "
+            f"error can be measured beyond it at these parameters; T = {top:g} needs parameters with a growth rate "
+            f"{math.ceil(10 * top / t) / 10:g}× smaller")
 
 
 def _checkpoints(setup, h, counts, tick):
     """States at counts[i] steps of h, run in pieces of at most CHUNK steps (tick after each),
-    and whether the run failed before the last count."""
+    and the RunError that stopped it before the last count (None if it did not)."""
     z, pt, done, out = None, None, 0, []
     for N in counts:
         while done < N:
             n = min(CHUNK, N - done)
             try:
                 run = simulate(setup, h, n * h, z0=z, pt0=pt, t0=done * h, stride=n)
-            except RunError:
-                return out, True
+            except RunError as e:
+                return out, e
             z, pt, done = run.z[-1], run.pt[-1], done + n
             tick()
         out.append(z[0])
-    return out, False
+    return out, None
 
 
-def growth_exponent(rows, solver, key="error"):
-    """Slope of log(key) against log(T) for one solver's drift rows, NaN with fewer than 3
-    points. For the error: over the horizons before it first reaches 0.1 (where it saturates at
-    the orbit's size, and a phase error can wrap back below it) and above ten times the
-    reference's uncertainty."""
+def _growth_points(rows, solver, key):
+    """(T, value, round-off bound) of the drift rows a growth exponent is fitted over. For the
+    error: the horizons before it first reaches 0.1 (where it saturates at the orbit's size, and a
+    phase error can wrap back below it) and above ten times the reference's uncertainty."""
     pts = []
     for r in sorted((r for r in rows if r["solver"] == solver), key=lambda r: r["T"]):
         v = r[key]
         if key == "error" and not v < 0.1:
             break
         if v > 0 and (key != "error" or v > 10 * r["reference_uncertainty"]):
-            pts.append((r["T"], v))
+            scale = 1.0 if key == "error" else r.get("H_scale", math.nan)
+            pts.append((r["T"], v, ROUNDOFF * np.finfo(float).eps * scale * math.sqrt(r["steps"])))
+    return pts
+
+
+def growth_exponent(rows, solver, key="error"):
+    """Slope of log(key) against log(T) for one solver's drift rows (over `_growth_points`), NaN
+    with fewer than 3 points."""
+    pts = _growth_points(rows, solver, key)
     if len(pts) < 3:
         return math.nan
-    T, v = np.log(np.array(pts)).T
+    T, v = np.log(np.array([(T, v) for T, v, _ in pts])).T
     return float(np.polyfit(T, v, 1)[0])
+
+
+def at_roundoff(rows, solver, key="error"):
+    """Whether every value a growth exponent of `key` is fitted over is at round-off level: within
+    ROUNDOFF ε s √N at a horizon of N steps, s the scale of the value's rounding (|H|, `H_scale`,
+    for |H + p_t|; 1 for the relative error). The slope of such values measures the rounding, not
+    the method. False with no such values.
+
+    Each step rounds H + p_t by about ε |H|; unbiased roundings add up to about ε |H| √N. Measured
+    (max |H + p_t| / ε |H| √N): gauss4, gauss6 and rk8 on charged (h = 0.001, 1e5 to 1e6 steps),
+    gauss6 and rk8 on modulated and on damped at γ = 2e-4, rk8 on decaying (h = 0.1, 1e3 to 1e5
+    steps): 0.6 to 6.4, growing like T^0 to T^1.2 (rk8 has no truncation drift at these steps: its
+    growth is the rounding's); the smallest value that is not rounding, rk8's on damped at
+    γ = 0.2 and T = 5000 (e^(γt) spanning 434 decades), 47; every method's drift at the scenes'
+    default steps, 190 and more. ROUNDOFF = 10 lies between. RK4 on charged at h = 0.001 (4.5 to 7,
+    growing like T) is at round-off by this rule: rk8's rounding there is as large and grows as fast."""
+    pts = _growth_points(rows, solver, key)
+    return bool(pts) and all(v <= bound for _, v, bound in pts)
+
+
+def growth_text(rows, solver, key="error"):
+    """The growth exponent as a table or a legend shows it: '0.97'; 'round-off' where the values
+    are at round-off level (`at_roundoff`); '–' with fewer than 3 horizons to fit."""
+    if at_roundoff(rows, solver, key):
+        return "round-off"
+    g = growth_exponent(rows, solver, key)
+    return f"{g:.2f}".replace("-0.00", "0.00") if math.isfinite(g) else "–"
 
 
 def cost_at(rows, solver, error):

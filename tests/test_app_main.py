@@ -283,6 +283,96 @@ def test_a_message_queued_while_another_batch_is_written_is_still_sent():
     assert sent == [["one"], ["two"]]
 
 
+def test_a_page_that_closes_while_written_to_leaves_no_traceback_and_other_failures_still_show(monkeypatch):
+    """app/page.closed_writes_seen: a page closes while Panel writes a message to it (in three parts,
+    panel.io.document.dispatch_tornado). Either a part finds the socket closing, and Panel drops the
+    parts it had started; or the page's document is destroyed while Panel awaits a part, which
+    cancels the wait. The parts never awaited fail with WebSocketClosedError, and asyncio logged
+    each ("Task exception was never retrieved") with a traceback; with app/page's write it does
+    not, while a write failing otherwise still is. With tornado's own write Panel still leaves them
+    (else the adjustment is no longer needed)."""
+    import asyncio
+    import functools
+    import gc
+    import inspect
+
+    from bokeh.document import Document
+    from panel.io import document
+    from tornado.websocket import WebSocketClosedError, WebSocketHandler
+
+    class Writes:
+        """tornado's connection of a page that closes during a message: its writes wait, then fail;
+        it is closing after `open` writes, and a write then raises at once, as tornado's does."""
+
+        def __init__(self, failure, open):
+            self.failure, self.open, self.closed = failure, open, asyncio.Event()
+
+        def is_closing(self):
+            return self.open == 0
+
+        def write_message(self, message, binary=False):
+            self.open -= 1
+
+            async def write():
+                await self.closed.wait()
+                raise self.failure
+
+            return asyncio.ensure_future(write())
+
+    class Socket(WebSocketHandler):
+        def __init__(self, writes):  # only what WebSocketHandler.write_message reads
+            self.ws_connection = writes
+
+    class Connection:
+        def __init__(self, writes):
+            self._socket = Socket(writes)
+
+        class protocol:
+            @staticmethod
+            def create(kind, events):
+                return types.SimpleNamespace(header_json="{}", metadata_json="{}", content_json="{}", _buffers=[])
+
+    def close_while_written(failure, open):
+        """What asyncio logs when a page closes after `open` writes of a message (3: all of it): two
+        writes never awaited, the two before the third (2), or the two after the first (3)."""
+        logged = []
+
+        async def scenario():
+            asyncio.get_running_loop().set_exception_handler(lambda loop, context: logged.append(context))
+            doc = Document()
+            writes = Writes(failure, open)
+            try:
+                document.write_events(doc, [Connection(writes)], ["a change"])
+            except WebSocketClosedError:  # as panel.io.document.unlocked does, which then schedules it anew
+                pass
+            document._dispatch_write_task(doc, document._run_write_futures, doc)  # as write_events does, unlocked
+            for _ in range(3):
+                await asyncio.sleep(0)
+            doc.destroy = functools.partial(document._destroy_document, doc)  # as panel.io.application does
+            doc.destroy(None)
+            writes.closed.set()
+            for _ in range(3):
+                await asyncio.sleep(0)
+            gc.collect()
+
+        asyncio.run(scenario())
+        return [(c["message"], type(c["exception"]).__name__) for c in logged]
+
+    page.adjust_panel()
+    page.adjust_panel()
+    assert WebSocketHandler.write_message.cosymp and not getattr(WebSocketHandler.write_message.__wrapped__,
+                                                                 "cosymp", False)
+    assert "WebSocketHandler.write_message(socket" in inspect.getsource(document.dispatch_tornado)
+    never = "Task exception was never retrieved"
+    for open in (2, 3):
+        assert close_while_written(WebSocketClosedError(), open) == []
+        assert close_while_written(ValueError("not a closed page"), open) == [(never, "ValueError")] * 2
+    monkeypatch.setattr(WebSocketHandler, "write_message", WebSocketHandler.write_message.__wrapped__)
+    for open in (2, 3):
+        assert close_while_written(WebSocketClosedError(), open) == [(never, "WebSocketClosedError")] * 2, \
+            "Panel no longer leaves a closed page's writes unretrieved: drop app/page.closed_writes_seen"
+
+
 def test_tabs_are_built_ahead_one_at_a_time_while_the_page_is_idle_and_start_no_measurement():
     """App._ahead builds one more tab per call, hidden, once the server (every page) has been idle
     AHEAD_IDLE_S: its layout, and the data at hand drawn; nothing is computed for it (the θ lesson, the long run

@@ -1,8 +1,10 @@
 """The app's work-precision and long-horizon measurements (app.features.workprecision) and their
 plots, without a server."""
+import html
 import itertools
 import math
 import time
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -51,13 +53,22 @@ def test_the_plots_draw_every_finite_point_and_the_targets_table_names_the_ratio
     curves = plot.curves.source.data
     items = plot.curves.legend.items
     assert [item.index for item in items] == list(range(len(curves["xs"]))), "the legend lists exactly the lines"
-    assert all(item.renderers == [plot.curves.lines] for item in items)
+    assert all(item.renderers == [plot.curves.lines, plot.curves.marks] for item in items)
+    keys = plot.curves.keys.data
+    assert np.isnan(keys["x"]).all() and len(keys["x"]) == views.Curves.KEYS > len(items), \
+        "a legend marker per line, drawn nowhere, and more than any plot's lines from the start"
+    assert len(views.WorkPrecisionPlot("error", "", None).curves.keys.data["marker"]) == views.Curves.KEYS
+    assert dict(zip([item.label.value for item in items], keys["marker"])) == {
+        "rk4": "triangle", "theta(0.3)": "circle", "scipy-RK45": "square", "scipy-DOP853": "square",
+        "scipy-LSODA": "square"}
     assert plot.curves.lines in plot.fig.renderers, "the lines are the figure's own, built with it"
     styles = {item.label.value: curves["dash"][item.index] for item in items}
     assert styles["rk4"] == "solid" and styles["scipy-DOP853"] == "dashed"
     points = plot.points.data
     assert len(points["x"]) == len(views.wp_points(m.rows, "error")) == sum(len(x) for x in curves["xs"])
-    assert set(points["marker"]) == {"circle", "square"}
+    assert {(r, m) for r, m in zip(points["solver"], points["marker"])} == {
+        ("rk4", "triangle"), ("theta(0.3)", "circle"), ("scipy-RK45", "square"), ("scipy-DOP853", "square"),
+        ("scipy-LSODA", "square")}, "each point in its family's marker"
     assert set(points) == set(views.POINT_COLUMNS) == set(views.WorkPrecisionPlot("error", "", None).points.data), \
         "the glyph's columns exist before the first data (else 'nonexistent field' console warnings)"
     n_renderers = len(plot.fig.renderers)
@@ -219,13 +230,36 @@ def test_long_horizons_show_linear_error_growth_and_the_fitted_exponents():
 
 
 def test_long_horizons_past_the_reference_show_the_horizons_before_it():
+    """The damped oscillator at γ = 0.2 leaves floating point at t = 7098: the page says, beside the
+    rows, where the horizons stop, why, and how to reach the one asked for."""
     s = Study(scene="damped")
     lh = LongHorizons(s, T_max=1e4)
     lh.start()
     top = max(r["T"] for r in lh.rows)
-    assert lh.status.startswith("done") and 100 <= top < 1e4
+    assert lh.status.startswith("done") and top == 5000
     assert s.message.level == "warning" and f"up to T = {top:g} only" in s.message.text
     assert f"T up to {top:g}" in lh.setting
+    assert lh.capped.startswith("Shown up to T = 5000, not to the 10000 asked for: the exact flow leaves floating "
+                                "point at t ≈ 7")
+    assert "T = 10000 needs parameters with a growth rate 1.5× smaller" in lh.capped
+    view = views.WorkPrecisionView(s, SimpleNamespace(measure=WorkPrecision(s, methods=["rk4"]), long=lh))
+    view.__panel__()
+    view.update()
+    assert html.unescape(view.long_capped.object) == f"<p class='caveat'>{lh.capped}</p>"
+    s.scene = "modulated"
+    view.update()
+    assert lh.capped == "" and view.long_capped.object == ""
+
+
+def test_growth_at_round_off_is_said_in_the_legend_and_the_table():
+    eps = np.finfo(float).eps
+    rows = [{"solver": solver, "T": T, "steps": 10 * T, "order": 4, "preserves": "symplectic", "error": 1e-3 * T,
+             "reference_uncertainty": 0.0, "H_ext_max_abs": eps * math.sqrt(10 * T) * size, "H_scale": 1.0}
+            for solver, size in (("gauss6", 3.0), ("rk4", 1e6)) for T in (100.0, 1e3, 1e4)]
+    plot = views.DriftPlot("H_ext_max_abs", "")
+    plot.set(rows)
+    assert [item.label.value for item in plot.curves.legend.items] == ["gauss6: at round-off", "rk4: slope 0.50"]
+    assert views.growth_table(rows)["max |H~| ∝ T^"] == ["round-off", "0.50"]
 
 
 @pytest.mark.parametrize("h, needle", [(0.0, "h > 0"), (1e-4, "beyond this view's limit")])

@@ -14,7 +14,7 @@ import pytest
 from cosymp.cli import main
 from cosymp.methods import METHODS
 from cosymp.report import Figure, Report, Section, Series, envelope, render
-from cosymp.report.style import METHOD_COLORS, MIN_DISTANCE
+from cosymp.report.style import FAMILY_MARKERS, METHOD_COLORS, MIN_DISTANCE, method_marker
 from cosymp.scenes import SCENES
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -45,10 +45,10 @@ def test_text_is_escaped_and_data_cannot_close_the_script():
     assert spec[0]["series"][0]["label"] == "</script><b>" and spec[0]["series"][0]["y"] == [1, None]
 
 
-def open_offline(path, shot, interact=False):
+def open_offline(path, shot, interact=False, js=None):
     """Open a report from disk with the network blocked; returns (requests other than the file,
     console errors, plots drawn, and when asked the second plot's hover readout and its x range
-    before and after dragging a zoom box)."""
+    before and after dragging a zoom box, and what the script js evaluates to)."""
     playwright = pytest.importorskip("playwright.sync_api")
     if not Path(CHROMIUM).exists():
         pytest.skip(f"no Chromium at {CHROMIUM}")
@@ -79,6 +79,8 @@ def open_offline(path, shot, interact=False):
             page.mouse.move(box["x"] + 0.6 * box["width"], box["y"] + 0.7 * box["height"], steps=5)
             page.mouse.up()
             answers["zoom"] = (before, page.evaluate("[cosympPlots[1].scales.x.min, cosympPlots[1].scales.x.max]"))
+        if js:
+            answers["js"] = page.evaluate(js)
         ARTIFACTS.mkdir(exist_ok=True)
         page.screenshot(path=str(ARTIFACTS / shot), full_page=True)
         browser.close()
@@ -98,6 +100,48 @@ def test_scene_report_from_the_command_line(tmp_path):
     assert answers["hover"] not in ("", "–")
     (x0, x1), (y0, y1) = answers["zoom"]
     assert x0 < y0 < y1 < x1
+
+
+MARKS_JS = """() => Object.fromEntries(cosympPlots[0].series.slice(1).map((s, i) => {
+    const u = cosympPlots[0], x = u.data[i + 1][0][0], y = u.data[i + 1][1][0];
+    return [s.label, Array.from(u.ctx.getImageData(Math.round(u.valToPos(x, "x", true)),
+                                                   Math.round(u.valToPos(y, "y", true)), 1, 1).data).slice(0, 3)];
+}))"""
+
+
+def test_markers_are_drawn_in_a_parametric_plot(tmp_path):
+    """A work-precision plot is parametric: uPlot gave its point painter no points, so no marker was
+    drawn. Two single points (a line of one point draws nothing), a square and a triangle."""
+    path = tmp_path / "marks.html"
+    series = [Series("a", [0.0], [0.0], points=True, color="#ff0000", marker="square"),
+              Series("b", [1.0], [1.0], points=True, color="#0000ff", marker="triangle")]
+    path.write_text(render(Report("marks", [], [Section("s", [], [Figure("f", "x", "y", series, parametric=True)])])))
+    _, errors, drawn, answers = open_offline(path, "report-marks.png", js=MARKS_JS)
+    assert errors == [] and drawn == 1
+    assert answers["js"] == {"a": [255, 0, 0], "b": [0, 0, 255]}
+
+
+ORDER_JS = """() => cosympPlots.map(u => ({
+    drawn: u.series.slice(1).map(s => [s.label, s.dash ? "dashed" : "solid"]),
+    legend: Array.from(u.root.querySelectorAll(".u-legend .u-series")).map(r => r.textContent.replace(/[:–]/g, ""))
+        .filter(t => t && t !== "t")}))"""
+
+
+def test_the_report_draws_the_first_method_over_the_second(tmp_path):
+    """As the app does: the first method (A) solid and translucent on top of the second (B), dashed
+    (RK4 hid midpoint's whole phase portrait); the legends list A first."""
+    path = tmp_path / "modulated.html"
+    out, err = io.StringIO(), io.StringIO()
+    assert main(["report", "modulated", "--method", "midpoint", "--vs", "rk4", "--T", "20", "-o", str(path)],
+                out, err) == 0, err.getvalue()
+    spec = json.loads(re.search(r'id="figures" type="application/json">(.*?)</script>', path.read_text(),
+                                re.DOTALL).group(1).replace("<\\/", "</"))
+    assert all([s["alpha"] for s in f["series"]] == [0.7, 1.0] for f in spec)
+    requests, errors, drawn, answers = open_offline(path, "report-order.png", js=ORDER_JS)
+    assert requests == [] and errors == [] and drawn == len(spec) == len(answers["js"])
+    for plot in answers["js"]:
+        assert plot["drawn"] == [["rk4", "dashed"], ["midpoint", "solid"]], "uPlot draws the last on top"
+        assert plot["legend"] == ["midpoint", "rk4"]
 
 
 def test_the_quick_paper_report_has_every_section():
@@ -141,6 +185,63 @@ def test_bad_report_input_is_one_line():
         assert says in err.getvalue() and err.getvalue().count("\n") == 1
 
 
+def test_a_report_says_what_it_compiles_and_computes_on_stderr(tmp_path, monkeypatch):
+    """On a cold cache the paper report printed nothing for minutes: the kernels it needs and the cache
+    lacks (here two units said to be missing, one it does not need) are compiled with a line each,
+    then a line per stage; stdout keeps its one line."""
+    from cosymp import warm
+
+    units = {u.key: u for u in warm.units()}
+    monkeypatch.setattr(warm, "missing", lambda: [units["decaying/Theta"], units["kapitza/Gauss"]])
+    path = tmp_path / "decaying.html"
+    out, err = io.StringIO(), io.StringIO()
+    assert main(["report", "decaying", "-o", str(path)], out, err) == 0, err.getvalue()
+    assert out.getvalue() == f"report written to {path} ({path.stat().st_size / 1e6:.2f} MB)\n"
+    lines = err.getvalue().splitlines()
+    assert lines[0].startswith("cosymp: compiling 1 groups of kernels") and "decaying × Theta" in lines[0]
+    assert "[  1/1]" in lines[1] and "compiled decaying × Theta" in lines[1]
+    assert [line.split("] ", 1)[1] for line in lines[2:]] == [
+        "midpoint: run and diagnostics", "midpoint: reference", "rk4: run and diagnostics", "rk4: reference", "done"]
+
+
+def test_a_kernel_that_fails_to_compile_is_one_line_and_exit_3(monkeypatch):
+    from cosymp import warm
+
+    bad = warm.Unit("nowhere/Family", "nowhere", ("none",))
+    monkeypatch.setattr(warm, "missing", lambda: [bad])
+    monkeypatch.setattr(warm, "unit_keys", lambda scene, methods: [bad.key])
+    out, err = io.StringIO(), io.StringIO()
+    assert main(["report", "decaying", "-o", "x.html"], out, err) == 3
+    last = err.getvalue().splitlines()[-1]
+    assert last.startswith("cosymp: 1 of 1 groups of kernels failed to compile, e.g. nowhere/Family")
+    assert "Traceback" not in err.getvalue() and out.getvalue() == ""
+
+
+def test_the_paper_reports_kernels_are_compiled_ahead(monkeypatch):
+    """Every setup the paper report runs (its sections, and the work-precision runs on a tiny
+    horizon) is in a unit that `cosymp report paper` compiles first."""
+    from cosymp import warm
+    from cosymp import workprecision as wp
+    from cosymp.integrate import Setup
+    from cosymp.report.paper import WP_METHODS, kernels, paper_report
+
+    made = set()
+    make = Setup.make.__func__
+
+    def recording(cls, *args, **kwargs):
+        setup = make(cls, *args, **kwargs)
+        made.add(warm.key_of(setup))
+        return setup
+
+    monkeypatch.setattr(Setup, "make", classmethod(recording))
+    paper_report(long=False, work_precision=False)
+    for name in ("damped", "modulated"):
+        wp.measure(name, WP_METHODS, T=1.0, hs=[0.5], peers=True, rtols=[1e-3], budget=0.0)
+    ahead = {k for scene, methods in kernels().items() for k in warm.unit_keys(scene, methods)}
+    assert made <= ahead, made - ahead
+    assert {k for scene, methods in kernels(work_precision=False).items() for k in warm.unit_keys(scene, methods)} < ahead
+
+
 def test_app_report_uses_the_views_runs():
     from app.study import Study, study_report
 
@@ -168,13 +269,79 @@ def cie_lab(color):
     return 116 * fy - 16, 500 * (fx - fy), 200 * (fy - fz)
 
 
-def test_every_method_has_a_colour_far_from_every_other_methods():
-    """A work-precision plot shows every method at once: symplectic Euler, Boris and Gauss 4 were
-    three teals and greens, the compositions two violets (CIE76 distances 14-22)."""
+def ciede2000(lab1, lab2):
+    """The CIEDE2000 colour difference of two CIE L*a*b* colours (Sharma, Wu and Dalal, 2005)."""
+    (L1, a1, b1), (L2, a2, b2) = lab1, lab2
+    C = (math.hypot(a1, b1) + math.hypot(a2, b2)) / 2
+    G = 0.5 * (1 - math.sqrt(C ** 7 / (C ** 7 + 25 ** 7)))
+    a1, a2 = (1 + G) * a1, (1 + G) * a2
+    C1, C2 = math.hypot(a1, b1), math.hypot(a2, b2)
+    h1, h2 = (math.degrees(math.atan2(b, a)) % 360 if c else 0.0 for a, b, c in ((a1, b1, C1), (a2, b2, C2)))
+    dh = 0.0 if C1 * C2 == 0 else (h2 - h1 + 180) % 360 - 180
+    dH = 2 * math.sqrt(C1 * C2) * math.sin(math.radians(dh / 2))
+    L, Cm = (L1 + L2) / 2, (C1 + C2) / 2
+    if C1 * C2 == 0:
+        h = h1 + h2
+    elif abs(h1 - h2) <= 180:
+        h = (h1 + h2) / 2
+    else:
+        h = (h1 + h2 + 360) / 2 if h1 + h2 < 360 else (h1 + h2 - 360) / 2
+    T = (1 - 0.17 * math.cos(math.radians(h - 30)) + 0.24 * math.cos(math.radians(2 * h))
+         + 0.32 * math.cos(math.radians(3 * h + 6)) - 0.20 * math.cos(math.radians(4 * h - 63)))
+    SL = 1 + 0.015 * (L - 50) ** 2 / math.sqrt(20 + (L - 50) ** 2)
+    SC, SH = 1 + 0.045 * Cm, 1 + 0.015 * Cm * T
+    RT = (-math.sin(math.radians(60 * math.exp(-(((h - 275) / 25) ** 2))))
+          * 2 * math.sqrt(Cm ** 7 / (Cm ** 7 + 25 ** 7)))
+    dL, dC = (L2 - L1) / SL, (C2 - C1) / SC
+    return math.sqrt(dL ** 2 + dC ** 2 + (dH / SH) ** 2 + RT * dC * dH / SH)
+
+
+def distance(a, b):
+    return ciede2000(cie_lab(a), cie_lab(b))
+
+
+def sharing_a_plot():
+    """The pairs of methods whose colours can share a plot: every two methods that apply to one
+    scene (its work-precision plot shows them all, with scipy's solvers), the exact flow with any
+    of them (a comparison pairs it with any method; never with scipy's, it is their reference)."""
+    peers = [m for m in METHOD_COLORS if m.startswith("scipy-")]
+    pairs = set()
+    for scene in SCENES.values():
+        applies = [m for m in METHODS if METHODS[m].refusal(scene) is None]
+        pairs |= {frozenset(p) for p in itertools.combinations([m for m in applies if m != "exact"] + peers, 2)}
+        pairs |= {frozenset(("exact", m)) for m in applies if m != "exact"}
+    return pairs
+
+
+def test_every_method_has_a_colour_far_from_every_method_it_can_share_a_plot_with():
+    """CIEDE2000, not CIE76: the previous palette kept every CIE76 distance above 25, and yet rk4
+    and composition6 read as one red, symplectic-euler and leapfrog as one teal, gauss4 and boris as
+    one green, composition4 and blanes-moan6 as one violet in a work-precision plot; their CIEDE2000
+    distances, 11 to 20.5, are all below MIN_DISTANCE."""
     assert set(METHODS) <= set(METHOD_COLORS)
     assert cie_lab("#ffffff") == pytest.approx((100, 0, 0), abs=0.05)
-    assert math.dist(cie_lab("#ff0000"), cie_lab("#000000")) == pytest.approx(117.3, abs=0.2)  # known value
-    distances = {(a, b): math.dist(cie_lab(METHOD_COLORS[a]), cie_lab(METHOD_COLORS[b]))
-                 for a, b in itertools.combinations(METHOD_COLORS, 2)}
-    close = {pair: round(d) for pair, d in distances.items() if d < MIN_DISTANCE}
+    for lab1, lab2, known in (((50, 2.6772, -79.7751), (50, 0, -82.7485), 2.0425),  # Sharma et al., pairs 1, 7, 17, 25
+                              ((50, 0, 0), (50, -1, 2), 2.3669), ((50, 2.5, 0), (73, 25, -18), 27.1492),
+                              ((60.2574, -34.0099, 36.2677), (60.4626, -34.1751, 39.4387), 1.2644)):
+        assert ciede2000(lab1, lab2) == pytest.approx(known, abs=1e-4)
+    alike = {("rk4", "composition6"): ("#e03131", "#d6336c"), ("symplectic-euler", "leapfrog"): ("#15aabf", "#00c6a4"),
+             ("gauss4", "boris"): ("#2b8a3e", "#5c940d"), ("composition4", "blanes-moan6"): ("#9775fa", "#bb88cc")}
+    for pair, (a, b) in alike.items():
+        assert math.dist(cie_lab(a), cie_lab(b)) > 25 and distance(a, b) < MIN_DISTANCE, pair
+    pairs = sharing_a_plot()
+    assert frozenset(("boris", "leapfrog")) not in pairs and frozenset(("boris", "gauss4")) in pairs
+    close = {tuple(sorted(p)): round(distance(*(METHOD_COLORS[m] for m in p)), 1) for p in pairs
+             if distance(*(METHOD_COLORS[m] for m in p)) < MIN_DISTANCE}
     assert not close, close
+
+
+def test_every_family_has_a_marker_of_its_own():
+    """Each family of methods (the kernel family of its data) and scipy's solvers have their own
+    marker, the same for every member, in the app's work-precision plots and the paper report's."""
+    families = {}
+    for m in METHODS:
+        families.setdefault(type(METHODS[m].data()).__name__, set()).add(method_marker(m))
+    assert all(len(markers) == 1 for markers in families.values()), families
+    shapes = [next(iter(markers)) for markers in families.values()] + [method_marker("scipy-DOP853")]
+    assert len(set(shapes)) == len(shapes) == len(FAMILY_MARKERS)
+    assert method_marker("theta(0.3)") == method_marker("midpoint") == "circle" and method_marker("rk4") == "triangle"

@@ -1,13 +1,16 @@
 """Work-precision and long-horizon measurements on tiny configurations."""
 import io
 import math
+import re
 
 import numpy as np
 import pytest
 
 from cosymp import workprecision as wp
 from cosymp.cli import main
-from cosymp.progress import Bar
+from cosymp.errors import RunError
+from cosymp.integrate import Setup
+from cosymp.progress import Bar, Lines, for_stream
 
 HS = [0.4, 0.2, 0.1, 0.05]
 
@@ -143,6 +146,9 @@ def test_cli_workprecision(tmp_path):
     text = out.getvalue()
     assert "rk4" in text and "s to 1e-6" in text and "4 runs written" in text
     assert len(wp.read_rows(path)) == 4
+    midpoint = next(line for line in text.splitlines() if line.startswith("midpoint"))
+    assert midpoint.split()[-4:-2] == ["–", "–"], "midpoint (error 6e-4 at best) reaches neither 1e-6 nor 1e-9"
+    assert "nan" not in text
 
 
 def test_cli_long(tmp_path):
@@ -152,6 +158,18 @@ def test_cli_long(tmp_path):
     assert code == 0, err.getvalue()
     assert "err T=1000" in out.getvalue() and "H~ slope" in out.getvalue()
     assert len(wp.read_rows(tmp_path / "d.json")) == 3
+    midpoint = next(line for line in out.getvalue().splitlines() if line.startswith("midpoint"))
+    assert midpoint.split()[-3] == "–" and midpoint.split()[-1] == "0.00", "error past 0.1 at T = 1000; |H~| bounded"
+
+
+def test_cli_long_past_the_reference_says_where_and_prints_no_nan():
+    out, err = io.StringIO(), io.StringIO()
+    assert main(["workprecision", "damped", "--long", "--methods", "midpoint", "--horizons", "1000", "2000", "1e4"],
+                out, err) == 0, err.getvalue()
+    text = out.getvalue()
+    assert "nan" not in text and "-0.00" not in text
+    assert 7090 < float(re.search(r"leaves floating point at t ≈ (\S+)", text).group(1)) < 7110
+    assert "T = 10000 needs parameters with a growth rate 1.5× smaller" in text
 
 
 @pytest.mark.parametrize("argv,says", [
@@ -191,22 +209,80 @@ def test_progress_bar_draws_on_a_terminal():
     assert quiet.getvalue() == ""
 
 
+def test_progress_off_a_terminal_is_a_line_per_stage():
+    """A log gets a line when a stage begins, and within one at most a line per `every` seconds."""
+    stream = io.StringIO()
+    lines = for_stream(stream)
+    assert isinstance(lines, Lines)
+    lines.every = 3600.0
+    for done, label in ((0, "reference"), (0, "rk4 h = 0.1"), (1, "midpoint h = 0.1"), (1, "midpoint h = 0.05")):
+        lines(done, 2, label)
+    lines.every = 0.0
+    lines(1, 2, "midpoint h = 0.025")
+    lines.close()
+    said = [line.split("s  ", 1)[1] for line in stream.getvalue().splitlines()]
+    assert said == ["[0/2 done] reference", "[1/2 done] midpoint h = 0.1", "[1/2 done] midpoint h = 0.025"]
+
+
 def test_growth_exponent_stops_where_the_error_saturates():
     """A phase error that wrapped back below 0.1 after saturating must not enter the fit."""
-    rows = [{"solver": "x", "T": T, "error": e, "reference_uncertainty": 0.0, "H_ext_max_abs": 1e-9}
-            for T, e in ((1.0, 1e-4), (10.0, 1e-3), (100.0, 1e-2), (1e3, 0.5), (1e4, 0.01))]
+    rows = [{"solver": "x", "T": T, "steps": 10 * T, "error": e, "reference_uncertainty": 0.0, "H_ext_max_abs": 1e-9,
+             "H_scale": 1.0} for T, e in ((1.0, 1e-4), (10.0, 1e-3), (100.0, 1e-2), (1e3, 0.5), (1e4, 0.01))]
     assert wp.growth_exponent(rows, "x") == pytest.approx(1.0)
     assert wp.growth_exponent(rows, "x", "H_ext_max_abs") == pytest.approx(0.0)
     assert math.isnan(wp.growth_exponent(rows[:2], "x"))
 
 
+def drift_rows(values, scale=1.0):
+    """Drift rows of a solver 'x' at horizons 10, 100, 1000 (10 steps per unit) with these max |H + p_t|."""
+    return [{"solver": "x", "T": T, "steps": 10 * T, "error": 1e-3, "reference_uncertainty": 0.0, "H_ext_max_abs": v,
+             "H_scale": scale} for T, v in zip((10.0, 100.0, 1e3), values)]
+
+
+def test_growth_at_round_off_is_said_instead_of_a_slope():
+    """Within ROUNDOFF ε |H| √N the values are rounding, whatever their slope; above it the slope
+    shows, never as '-0.00'; '–' with fewer than three horizons."""
+    eps = np.finfo(float).eps
+    walk = [eps * 2.0 * math.sqrt(10 * T) for T in (10.0, 100.0, 1e3)]  # ε |H| √N with |H| = 2
+    key = "H_ext_max_abs"
+    assert wp.growth_text(drift_rows([0.9 * wp.ROUNDOFF * w for w in walk], 2.0), "x", key) == "round-off"
+    assert wp.growth_text(drift_rows([1.1 * wp.ROUNDOFF * w for w in walk], 2.0), "x", key) == "0.50"
+    assert wp.growth_text(drift_rows([0.9 * wp.ROUNDOFF * w for w in walk], 1.0), "x", key) == "0.50", \
+        "the bound scales with |H|"
+    assert wp.growth_text(drift_rows([1e-3, 1e-3 * (1 - 1e-6), 1e-3 * (1 - 2e-6)]), "x", key) == "0.00"
+    assert wp.growth_text(drift_rows([1e-3, 1e-3]), "x", key) == "–"
+    assert wp.growth_text(drift_rows([1e-3] * 3), "x") == "0.00"
+
+
+def test_a_drift_at_round_off_and_a_real_one_side_by_side():
+    """modulated at h = 0.1: gauss6's max |H + p_t| is 1e-14 to 1e-13, growing like T^0.56 as the
+    rounding of its steps does; RK4's drifts like T at 1e-5 to 1e-3."""
+    rows = wp.drift("modulated", ["rk4", "gauss6"], h=0.1, horizons=[100.0, 1e3, 1e4])
+    assert max(r["H_ext_max_abs"] for r in rows if r["solver"] == "gauss6") < 1e-12
+    assert wp.growth_exponent(rows, "gauss6", "H_ext_max_abs") > 0.3
+    assert wp.growth_text(rows, "gauss6", "H_ext_max_abs") == "round-off"
+    assert wp.growth_text(rows, "rk4", "H_ext_max_abs") == "1.00"
+    assert all(0.5 < r["H_scale"] < 2.0 for r in rows)
+
+
 def test_drift_beyond_the_reference_is_a_nan_row():
-    """The damped oscillator at gamma = 0.2: its exact flow overflows before T = 5000."""
-    rows = wp.drift("damped", ["midpoint"], h=0.1, horizons=[100.0, 5000.0])
-    reached, beyond = rows
-    assert reached["status"] == "ok" and reached["error"] < 1.0
-    assert beyond["status"].startswith(wp.REFERENCE_SHORT) and "T = 5000" in beyond["status"]
+    """The damped oscillator at gamma = 0.2: its state passes 1.8e308 at t = 7098 (the hard case
+    'Damped beyond floating point'), so the reference reaches T = 5000 (q ~ 1e217; one exact step
+    from 0 overflowed there) and stops before 1e4, saying where."""
+    rows = wp.drift("damped", ["midpoint"], h=0.1, horizons=[100.0, 5000.0, 1e4])
+    reached, far, beyond = rows
+    assert reached["status"] == far["status"] == "ok" and reached["error"] < 1.0 and math.isfinite(far["error"])
+    assert beyond["status"].startswith(wp.REFERENCE_SHORT) and "T = 10000" in beyond["status"]
+    assert 7090 < float(re.search(r"t ≈ (\S+)", beyond["status"]).group(1)) < 7110
     assert math.isnan(beyond["error"])
+
+
+def test_the_work_precision_reference_reaches_where_the_state_does():
+    setup = Setup.make("damped", "midpoint")
+    z, label, _ = wp.reference(setup, 5000.0)
+    assert label == "exact flow" and 1e216 < abs(z[0]) < 1e218
+    with pytest.raises(RunError, match="leaves floating point at t ≈ 7098"):
+        wp.reference(setup, 8000.0)
 
 
 def test_drift_reports_every_chunk_so_cancel_is_prompt():

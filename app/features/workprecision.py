@@ -17,7 +17,7 @@ from cosymp import workprecision as wp
 from cosymp.errors import InputError
 from cosymp.integrate import Setup, check_step
 from cosymp.methods import METHODS
-from cosymp.report.style import method_color
+from cosymp.report.style import METHOD_COLORS, OTHER, method_color, method_marker
 from cosymp.scenes import SCENES
 
 from ..jobs import Job, Note
@@ -33,6 +33,7 @@ DRIFT_TOPS = (1e3, 1e4, 1e5, 1e6)
 DRIFT_DEFAULT_STEPS = 1_000_000
 MEASURE_BYTES = 96 * MB  # measured peak: work-precision 43 MB, long horizons 29 MB
 HEIGHT = 340
+MARKER_SIZE = 8  # points in the solver's family's marker (cosymp.report.style)
 KEEP = 16  # measurements this server remembers (MEASURED)
 WP_KEYS = {"error": "relative error at T", "H_ext_max_abs": "max |H~| over the run"}
 DRIFT_KEYS = {"error": "relative error at T", "H_ext_max_abs": "max |H~| up to T"}
@@ -244,6 +245,8 @@ class LongHorizons(Measurement):
     and a note says so."""
 
     h = param.Number(default=0.1, label="Step h", doc="The step of every method (default: the scene's).")
+    capped = param.String(default="", doc="Why the rows shown stop before the largest horizon asked for ('' if "
+                                          "they do not), said beside them.")
     T_max = param.Selector(default=1e4, objects={f"{T:.0e}": T for T in DRIFT_TOPS}, label="Largest horizon",
                            doc="The horizons are 1e2, 2e2, 5e2, 1e3, ... up to this one.")
     KIND = "long horizons"
@@ -261,6 +264,10 @@ class LongHorizons(Measurement):
         self.drop()
         self.param.methods.objects = applicable(self.study.scene, METHODS)
         self.param.update(self._defaults())
+
+    def drop(self):
+        self.capped = ""
+        super().drop()
 
     def _inputs(self):
         s = self.study
@@ -283,12 +290,19 @@ class LongHorizons(Measurement):
                         theta=job.method_theta, progress=run.report)
 
     def _finish(self, job, rows):
+        """The rows, and where the reference stopped short of the largest horizon, why and how to
+        reach it, on the page beside them (a toast points there)."""
         short = [r for r in rows if r["status"].startswith(wp.REFERENCE_SHORT)]
+        capped = ""
         if short:
             top = max((r["T"] for r in rows if not r["status"].startswith(wp.REFERENCE_SHORT)), default=0.0)
+            why = short[0]["status"].split(": ", 1)[1]
+            capped = (f"Shown up to T = {top:g}, not to the {job.horizons[-1]:g} asked for: {why}; or choose a "
+                      "smaller largest horizon.")
             job = dataclasses.replace(job, horizons=tuple(T for T in job.horizons if T <= top * (1 + 1e-9)))
-            self.say(Note("warning", f"long horizons shown up to T = {top:g} only: {short[0]['status']}"))
+            self.say(Note("warning", f"long horizons shown up to T = {top:g} only: the reason is beside them"))
             rows = [r for r in rows if r not in short]
+        self.capped = capped
         super()._finish(job, rows)
 
 
@@ -319,7 +333,13 @@ class Curves:
     the plot: the rows of one multi-line renderer built with the figure (a renderer added to a figure
     already on the page drew its line as a streak in the left margin; a pool of 24 line renderers per
     plot, used before, made the tab's four plots 0.7 s of the server's time to build), each legend
-    item showing its row."""
+    item showing its row and its solver's marker: a point per row of a scatter renderer built with
+    it, at no position, so that it draws nothing in the plot, and KEYS of them at least (BokehJS
+    sets a scatter's new data asynchronously, and a legend that drew a new row before it was set
+    read past the end of the old data: "Offset is outside the bounds of the DataView", when the
+    long horizons were first shown)."""
+
+    KEYS = len(METHOD_COLORS)  # more than the solvers of any plot
 
     def __init__(self, fig):
         self.fig = fig
@@ -327,17 +347,28 @@ class Curves:
         self.source.data = {"xs": [], "ys": [], "color": [], "dash": []}
         self.lines = fig.multi_line("xs", "ys", source=self.source, line_color="color", line_dash="dash",
                                     line_width=1.5)
+        self.keys = source()
+        self.keys.data = self._keys([])
+        self.marks = fig.scatter("x", "y", source=self.keys, color="color", marker="marker", size=MARKER_SIZE)
         self.legend = legend_outside(fig, [])  # built with the figure: one added later has no view
+
+    def _keys(self, solvers):
+        n = max(self.KEYS, len(solvers))
+        return {"x": np.full(n, np.nan), "y": np.full(n, np.nan),
+                "color": [method_color(s) for s in solvers] + [OTHER] * (n - len(solvers)),
+                "marker": [method_marker(s) for s in solvers] + ["circle"] * (n - len(solvers))}
 
     def set(self, curves):
         """curves: {label: (x, y, dashed, solver)} drawn in the solver's colour; the legend lists
-        them."""
+        them with the solver's marker."""
         rows = list(curves.values())
         self.source.data = {"xs": [np.asarray(x, float) for x, _, _, _ in rows],
                             "ys": [np.asarray(y, float) for _, y, _, _ in rows],
                             "color": [method_color(solver) for _, _, _, solver in rows],
                             "dash": ["dashed" if dashed else "solid" for _, _, dashed, _ in rows]}
-        self.legend.items = [LegendItem(label=label, renderers=[self.lines], index=k) for k, label in enumerate(curves)]
+        self.keys.data = self._keys([solver for _, _, _, solver in rows])
+        self.legend.items = [LegendItem(label=label, renderers=[self.lines, self.marks], index=k)
+                             for k, label in enumerate(curves)]
 
 
 POINT_COLUMNS = ("x", "y", "solver", "run", "steps", "error_text", "wall_text", "H_text", "det_text", "color",
@@ -356,7 +387,7 @@ class WorkPrecisionPlot:
         # Every column the glyph and the hover read exists from the start (a missing one logged
         # "nonexistent field" warnings in the console before the first data).
         self.points.data = {k: [] for k in POINT_COLUMNS}
-        dots = self.fig.scatter("x", "y", source=self.points, size=7, color="color", marker="marker",
+        dots = self.fig.scatter("x", "y", source=self.points, size=MARKER_SIZE, color="color", marker="marker",
                                 nonselection_alpha=1.0)
         self.fig.add_tools(HoverTool(renderers=[dots], tooltips=HOVER), TapTool(renderers=[dots]))
         self.rows = []
@@ -378,7 +409,7 @@ class WorkPrecisionPlot:
             "steps": [str(r["steps"]) for r in pts], "error_text": [_sci(r["error"]) for r in pts],
             "wall_text": [_sci(r["wall_s"], " s") for r in pts], "H_text": [_sci(r["H_ext_max_abs"]) for r in pts],
             "det_text": [_sci(r["det_max_dev"]) for r in pts], "color": [method_color(r["solver"]) for r in pts],
-            "marker": ["square" if r["kind"] == "scipy" else "circle" for r in pts]}
+            "marker": [method_marker(r["solver"]) for r in pts]}
 
 
 class DriftPlot:
@@ -391,8 +422,8 @@ class DriftPlot:
         self.fig = figure(title, "horizon T", DRIFT_KEYS[key], logx=True, logy=True, height=HEIGHT)
         self.curves = Curves(self.fig)
         self.dots = source()
-        self.dots.data = {"x": [], "y": [], "color": []}
-        self.fig.scatter("x", "y", source=self.dots, size=6, color="color")
+        self.dots.data = {"x": [], "y": [], "color": [], "marker": []}
+        self.fig.scatter("x", "y", source=self.dots, size=MARKER_SIZE, color="color", marker="marker")
         self.guides = {p: source() for p in (1, 2)}
         for p, src in self.guides.items():
             self.fig.line("x", "y", source=src, line_color="#868e96", line_width=2,
@@ -404,13 +435,13 @@ class DriftPlot:
         curves = {}
         for solver in dict.fromkeys(r["solver"] for r in rows):
             mine = [r for r in pts if r["solver"] == solver]
-            g = wp.growth_exponent(rows, solver, key)
-            slope = f"{g:.2f}".replace("-0.00", "0.00") if finite(g) else "–"
-            curves[f"{solver}: slope {slope}"] = (
+            text = wp.growth_text(rows, solver, key)
+            curves[f"{solver}: " + ("at round-off" if text == "round-off" else f"slope {text}")] = (
                 [r["T"] for r in mine], [r[key] for r in mine], False, solver)
         self.curves.set(curves)
         self.dots.data = {"x": np.array([r["T"] for r in pts]), "y": np.array([r[key] for r in pts]),
-                          "color": [method_color(r["solver"]) for r in pts]}
+                          "color": [method_color(r["solver"]) for r in pts],
+                          "marker": [method_marker(r["solver"]) for r in pts]}
         guides = {1: ([], []), 2: ([], [])}
         if pts:
             T0 = min(r["T"] for r in pts)
@@ -445,7 +476,10 @@ TARGETS_TEXT = ("<p class='doc'>Time to reach an error: the wall time at which a
 GROWTH_TEXT = ("<p class='doc'>Growth exponent: the slope of log(error) against log(T), fitted over the horizons "
                "before the error first reaches 0.1 (where it saturates at the orbit's size) and where it is above "
                "ten times the reference's uncertainty, and the slope of log(max |H~|); 1 is linear growth, 2 "
-               "quadratic, 0 bounded; – with fewer than three usable horizons. Grey: the slopes T and T² for "
+               "quadratic, 0 bounded; – with fewer than three usable horizons; <b>round-off</b> where every value "
+               f"fitted is at round-off level: max |H~| within {wp.ROUNDOFF:g} ε |H| √N after N steps (the rounding of "
+               f"N steps adds up to about ε |H| √N; ε = 2.2e-16), the relative error within {wp.ROUNDOFF:g} ε √N. "
+               "The slope of such values measures the rounding, not the method. Grey: the slopes T and T² for "
                "comparison.</p>")
 WP_TEXT = ("<p>What each method costs for the accuracy it delivers, on the sidebar's scene, parameters and θ, to "
            "the horizon T set here (the scene's paper horizon at first): "
@@ -495,9 +529,8 @@ def growth_table(rows):
     cols = {"method": [], "order": [], "preserves": [], "error ∝ T^": [], "max |H~| ∝ T^": []}
     for s in dict.fromkeys(r["solver"] for r in rows):
         first = next(r for r in rows if r["solver"] == s)
-        g = [wp.growth_exponent(rows, s, key) for key in DRIFT_KEYS]
-        for k, v in zip(cols, (s, str(first["order"]), str(first["preserves"]), *[f"{x:.2f}" if finite(x) else "–"
-                                                                                 for x in g])):
+        for k, v in zip(cols, (s, str(first["order"]), str(first["preserves"]),
+                               *[wp.growth_text(rows, s, key) for key in DRIFT_KEYS])):
             cols[k].append(v)
     return cols
 
@@ -534,7 +567,7 @@ class WorkPrecisionView(FeatureView):
         self.drift_plots = [DriftPlot(key, title) for key, title in
                             (("error", "relative error at T, at fixed h"), ("H_ext_max_abs", "max |H~| up to T, at fixed h"))]
         self.wp_hint = note("<p class='doc'>Nothing measured yet: press Start.</p>")
-        self.wp_failed, self.long_failed = note(""), note("")
+        self.wp_failed, self.long_failed, self.long_capped = note(""), note(""), note("")
         self.wp_reference, self.long_reference = note(""), note("")
         self.targets, self.growth = table(["time to reach"]), table(["method"])
         self.wp_box = pn.Column(*[pane(p.fig) for p in self.wp_plots], self.wp_reference, note(TARGETS_TEXT),
@@ -542,7 +575,7 @@ class WorkPrecisionView(FeatureView):
         self.long_box = pn.Column(*[pane(p.fig) for p in self.drift_plots], self.long_reference, note(GROWTH_TEXT),
                                   self.growth, visible=False, **wide)
         self.follow(m, "rows", "running")
-        self.follow(lh, "rows")
+        self.follow(lh, "rows", "capped")
         return pn.Column(
             note(WP_TEXT.format(steps=f"{WP_MAX_STEPS:,}")),
             pn.Row(pn.widgets.MultiChoice.from_param(m.param.methods, name="Methods", **wide),
@@ -554,7 +587,7 @@ class WorkPrecisionView(FeatureView):
             pn.Row(pn.widgets.MultiChoice.from_param(lh.param.methods, name="Methods", **wide),
                    pn.widgets.FloatInput.from_param(lh.param.h, format="0.[000000]", width=140),
                    pn.widgets.Select.from_param(lh.param.T_max, width=140), **wide),
-            long_row, long_status, self.long_failed, self.long_box,
+            long_row, long_status, self.long_capped, self.long_failed, self.long_box,
             **wide)
 
     def wanted(self):
@@ -569,6 +602,7 @@ class WorkPrecisionView(FeatureView):
         self.long_box.visible = bool(lh.rows)
         self.wp_failed.object = failed_html(m.rows)
         self.long_failed.object = failed_html(lh.rows, lambda r: f"T = {r['T']:g}")
+        self.long_capped.object = f"<p class='caveat'>{html.escape(lh.capped)}</p>" if lh.capped else ""
         if m.rows:
             for p in self.wp_plots:
                 p.set(m.rows)

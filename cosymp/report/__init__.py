@@ -23,7 +23,8 @@ MAX_POINTS = 4000
 
 @dataclass
 class Series:
-    """One curve: label, x and y (NaN breaks the line), drawn dashed and/or with markers."""
+    """One curve: label, x and y (NaN breaks the line), drawn dashed and/or with markers of a shape
+    (style.FAMILY_MARKERS' names), with an opacity (alpha)."""
 
     label: str
     x: np.ndarray
@@ -31,12 +32,16 @@ class Series:
     dash: bool = False
     points: bool = False
     color: str = None
+    marker: str = "circle"
+    alpha: float = 1.0
 
 
 @dataclass
 class Figure:
     """A plot of series against a shared x axis (series may have their own x values). A
-    parametric figure (a phase portrait) draws each series in its own order instead."""
+    parametric figure (a phase portrait) draws each series in its own order instead. The series
+    are drawn last to first, so that the first is on top (the first method over the second, as the
+    app draws them); the legend lists them in order."""
 
     title: str
     xlabel: str
@@ -105,7 +110,7 @@ def _figure_json(fig, key):
         ok = np.isfinite(x) & ((x > 0) | (not fig.logx))
         x, y = x[ok], y[ok]
         order = np.arange(len(x)) if fig.parametric else np.argsort(x, kind="stable")
-        style = json.dumps({"label": s.label, "dash": s.dash, "points": s.points,
+        style = json.dumps({"label": s.label, "dash": s.dash, "points": s.points, "marker": s.marker, "alpha": s.alpha,
                             "color": s.color or PALETTE[i % len(PALETTE)]}, ensure_ascii=False)
         series.append(f'{style[:-1]},"x":{_array(x[order])},"y":{_array(y[order])}}}')
     head = {"id": key, "title": fig.title, "xlabel": fig.xlabel, "ylabel": fig.ylabel, "logx": fig.logx,

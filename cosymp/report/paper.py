@@ -15,7 +15,7 @@ from ..scenes import SCENES
 from ..study import compare, gauge_study
 from ..summary import long_envelopes
 from . import Figure, Report, Section, Series, Table
-from .style import GAUGE_COLORS, method_color
+from .style import GAUGE_COLORS, method_color, method_marker
 
 SCHEME = "symplectic-euler"
 REFERENCE = "rk4"
@@ -23,6 +23,21 @@ DELTA = 1e-4
 LONG_BINS = 2000
 WP_METHODS = ("rk4", "rk8", "midpoint", "symplectic-euler", "gauss4", "gauss6", "leapfrog", "blanes-moan6")
 GAUGE_QUANTITIES = (("x", "q", 0), ("y", "q", 1), ("p_x", "p", 0), ("p_y", "p", 1), ("Π_x", "Pi", 0), ("Π_y", "Pi", 1))
+
+
+def kernels(work_precision=True):
+    """{scene: the methods its runs use}, for compiling their kernels ahead (cosymp.warm): the
+    scheme and RK4 on each oscillator with its exact flow, the scheme in every gauge, and the
+    work-precision methods with their reference (the exact flow, or scipy checked against rk8)."""
+    out = {}
+    for s in SCENES.values():
+        if s.paper is None:
+            continue
+        methods = [SCHEME] if s.has_gauges else [SCHEME, REFERENCE]
+        if work_precision and not s.has_gauges:
+            methods += [m for m in WP_METHODS if METHODS[m].refusal(s) is None] + ["rk8"]
+        out[s.name] = methods + (["exact"] if s.has_flow else [])
+    return out
 
 
 def paper_report(progress=None, long=True, work_precision=True, command="cosymp report paper -o paper.html"):
@@ -176,7 +191,8 @@ def _work_precision(name, progress):
 
     def series(key):
         return [Series(s, [r["wall_s"] for r in rows if r["solver"] == s], [r[key] for r in rows if r["solver"] == s],
-                       dash=s.startswith("scipy"), points=True, color=method_color(s)) for s in solvers]
+                       dash=s.startswith("scipy"), points=True, color=method_color(s), marker=method_marker(s))
+                for s in solvers]
 
     t = wp.targets(rows)
     costs = Table(["solver", "s to error 1e-6", "s to error 1e-9"],
@@ -193,7 +209,10 @@ def _work_precision(name, progress):
         "after a warm-up. Not in the paper: it answers what each method costs for its accuracy.")], [
         Figure("Relative error at T against wall time", "wall time (s)", "relative error",
                series("error"), logx=True, logy=True, parametric=True,
-               caption="Each line joins one solver's runs in order of step size or tolerance."),
+               caption="Each line joins one solver's runs in order of step size or tolerance. Markers by family: "
+                       "triangles the Runge–Kutta methods, circles the θ-methods (midpoint, symplectic Euler), "
+                       "diamonds Gauss–Legendre, hexagons the splittings (leapfrog, Blanes–Moan), squares scipy's "
+                       "solvers (dashed)."),
         Figure("max |H + p_t| against wall time", "wall time (s)", "max |H + p_t|", series("H_ext_max_abs"),
                logx=True, logy=True, parametric=True),
         costs, ratios])

@@ -117,6 +117,38 @@
     return {stroke: p, fill: null, clip: null, band: null, gaps: null, flags: 0};
   }
 
+  /* Markers in the shape of the method's family (cosymp.report.style.FAMILY_MARKERS, Bokeh's
+     names): [vertices, angle of the first in degrees, inner radius of a star] */
+  var SHAPES = {triangle: [3, -90], inverted_triangle: [3, 90], diamond: [4, -90], square: [4, -45], hex: [6, 0],
+                star: [5, -90, 0.45]};
+
+  function marker(shape) {
+    /* uPlot passes the x window's indices, which a parametric plot (mode 2, no shared x) does not
+       have: there every point is drawn (uPlot drew none of the paper report's markers) */
+    return function (u, sidx, i0, i1) {
+      var pair = u.mode === 2, xs = pair ? u.data[sidx][0] : u.data[0], ys = pair ? u.data[sidx][1] : u.data[sidx];
+      var r = 3.5 * (window.devicePixelRatio || 1), p = new Path2D(), poly = SHAPES[shape];
+      var first = pair ? 0 : i0, last = pair ? xs.length - 1 : i1;
+      for (var i = first; i <= last; i++) {
+        if (xs[i] == null || ys[i] == null) continue;
+        var x = u.valToPos(xs[i], "x", true), y = u.valToPos(ys[i], "y", true);
+        if (shape === "plus") {
+          p.moveTo(x - r, y); p.lineTo(x + r, y); p.moveTo(x, y - r); p.lineTo(x, y + r);
+        } else if (!poly) {
+          p.moveTo(x + r, y); p.arc(x, y, r, 0, 2 * Math.PI);
+        } else {
+          var n = poly[0] * (poly[2] ? 2 : 1);
+          for (var k = 0; k <= n; k++) {
+            var a = (poly[1] + 360 * k / n) * Math.PI / 180, rk = poly[2] && k % 2 ? r * poly[2] : r * 1.2;
+            if (k === 0) p.moveTo(x + rk * Math.cos(a), y + rk * Math.sin(a));
+            else p.lineTo(x + rk * Math.cos(a), y + rk * Math.sin(a));
+          }
+        }
+      }
+      return {stroke: p, fill: shape === "plus" ? null : p, clip: null, flags: 3};
+    };
+  }
+
   function panZoom() {
     /* shift-drag pans, the wheel zooms around the cursor (pixel based) */
     return {hooks: {ready: function (u) {
@@ -147,18 +179,28 @@
     }}};
   }
 
+  /* uPlot draws its series in order, the last on top, and lists them in its legend in that order:
+     the figure's series are given to it last to first, so that the first (the first method) is
+     drawn over the others, and the legend's rows are put back in the figure's order. */
+  function legendInOrder(u, n) {
+    var rows = u.root.querySelectorAll(".u-legend .u-series");
+    for (var k = n - 1; k >= 0; k--) rows[rows.length - 1].parentNode.appendChild(rows[rows.length - n + k]);
+  }
+
   var plots = window.cosympPlots = [];
   specs.forEach(function (spec) {
     var el = document.getElementById(spec.id);
-    var pairs = spec.series.map(function (s) {
+    var drawn = spec.series.slice().reverse();
+    var pairs = drawn.map(function (s) {
       return [spec.logx ? log10(s.x) : s.x, spec.logy ? log10(s.y) : s.y];
     });
     var data = spec.parametric ? [null].concat(pairs) : uPlot.join(pairs);
     var series = [spec.parametric ? {} : {label: spec.xlabel, value: readout(spec.logx)}];
-    spec.series.forEach(function (s) {
+    drawn.forEach(function (s) {
+      var alpha = Math.round(255 * (s.alpha == null ? 1 : s.alpha)).toString(16).padStart(2, "0");
       var one = {
-        label: s.label, stroke: s.color, width: 1.5, spanGaps: true, dash: s.dash ? [6, 4] : undefined,
-        points: {show: s.points, size: 5, fill: s.color}, value: readout(spec.logy)
+        label: s.label, stroke: s.color + alpha, width: 1.5, spanGaps: true, dash: s.dash ? [6, 4] : undefined,
+        points: {show: s.points, size: 5, fill: s.color, paths: marker(s.marker)}, value: readout(spec.logy)
       };
       if (spec.parametric) {
         one.facets = [{scale: "x", auto: true}, {scale: "y", auto: true}];
@@ -167,13 +209,15 @@
       series.push(one);
     });
     var width = Math.max(320, Math.min(el.parentNode.clientWidth || 900, 1100));
-    plots.push(new uPlot({
+    var plot = new uPlot({
       mode: spec.parametric ? 2 : 1, title: spec.title, width: width, height: 340, series: series, plugins: [panZoom()],
       scales: {x: {time: false}, y: {range: padded}},
       axes: [axis(spec.xlabel, spec.logx, false), axis(spec.ylabel, spec.logy, true)],
       cursor: {drag: {x: true, y: true, uni: 20}},
       legend: {live: !spec.parametric}
-    }, data, el));
+    }, data, el);
+    legendInOrder(plot, drawn.length);
+    plots.push(plot);
   });
   document.body.setAttribute("data-plots", String(specs.length));
 })();

@@ -91,10 +91,17 @@ def _numbers(s, c, failure, err):
             c.run.wall_s, failure or "no"]
 
 
+A_ALPHA = 0.7
+"""The first method is drawn over the second and slightly transparent, so that the second shows
+where they cross (the app's A_ALPHA)."""
+
+
 def _series(runs, get):
-    """One Series per method of get(comparison) -> (x, y), in the methods' colours (the second dashed)."""
+    """One Series per method of get(comparison) -> (x, y), in the methods' colours: the first solid
+    and on top, translucent, the second dashed beneath it (as the app draws A over B)."""
     colors = pair_colors(*[st.method.name for st, _ in runs], *([""] if len(runs) < 2 else []))
-    return [Series(st.method.label(st.theta), *get(c), dash=i == 1, color=color)
+    return [Series(st.method.label(st.theta), *get(c), dash=i == 1, color=color,
+                   alpha=A_ALPHA if i == 0 and len(runs) > 1 else 1.0)
             for i, ((st, c), color) in enumerate(zip(runs, colors))]
 
 
