@@ -13,6 +13,7 @@ from served import CHROMIUM, START_TIMEOUT_S, TABLE_JS, TABLE_ROW, query
 
 from app.presets import PRESETS
 from cosymp.report.style import METHOD_COLORS
+from cosymp.scenes import lead
 
 pytestmark = [
     pytest.mark.slow,
@@ -211,7 +212,7 @@ def test_10_the_url_holds_only_valid_state_in_one_format(page):
 
 def test_11_play_opens_at_its_start(page):
     page.open(query(view="play"))
-    expect(page.page.locator("p.clock")).to_have_text("t = 0 of 2000")
+    expect(page.page.locator("p.clock")).to_have_text(f"t = 0 of {lead()[1].T:g}")
     assert page.page.evaluate(RANGE_JS) == [[0, 200, 0]]
     page.check()
 
@@ -245,5 +246,5 @@ def test_15_a_link_with_a_bad_step_shows_the_first_view_and_says_so(page):
         page.page.locator(".notyf__toast").first.wait_for()
         page.page.wait_for_selector(TABLE_ROW)
         wait_for_plot(page, "phase portrait")
-        expect(page.page.get_by_label("Step h")).to_have_value("0.2")
+        expect(page.page.get_by_label("Step h")).to_have_value(f"{lead()[1].h:g}")
     page.check()
