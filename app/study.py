@@ -24,7 +24,7 @@ from cosymp.reference import fine_steps, reference_states
 from cosymp.report import render
 from cosymp.report.scene import command as report_command
 from cosymp.report.scene import scene_report
-from cosymp.scenes import SCENES
+from cosymp.scenes import SCENES, first
 from cosymp.study import compare_until_failure as study_until_failure
 from cosymp.study import with_reference
 
@@ -554,9 +554,9 @@ class ChoiceControl(Control):
 
 
 class SceneInfo(pn.viewable.Viewer):
-    """The scene's title, summary, equations, what to look for, and its notes. A scene change
-    rewrites the panes' text (and shows as many equation panes as the scene has), so the page's
-    layout is not rebuilt."""
+    """The scene's title, summary, equations, what to look for (in the scene, and in its first view),
+    and its notes. A scene change rewrites the panes' text (and shows as many equation panes as the
+    scene has), so the page's layout is not rebuilt."""
 
     study = param.ClassSelector(class_=Study)
 
@@ -577,7 +577,8 @@ class SceneInfo(pn.viewable.Viewer):
         for i, pane_ in enumerate(self._equations):
             shown = i < len(s.equations)
             pane_.param.update(object=f"${s.equations[i]}$" if shown else "", visible=shown)
-        self._look.object = (f"<p class='lookfor'><b>Look for:</b> {html.escape(s.look_for)}</p>"
+        self._look.object = (f"<p class='lookfor'><b>Look for:</b> {html.escape(s.look_for)}<br><b>First view</b> "
+                             f"(what the Scene menu opens): {html.escape(first(s).doc)}</p>"
                              + (f"<ul class='notes'>{notes}</ul>" if notes else ""))
 
 

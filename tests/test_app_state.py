@@ -1,6 +1,7 @@
 """The app's states and views, without a server or a browser: what each view plots, the study's
 validation, the follower views, the long run, presets, and the memory budget."""
 import gc
+import html
 import json
 import math
 import pathlib
@@ -18,7 +19,7 @@ from app.presets import PRESETS, URL_NAMES, case_state, first_state, parse_items
 from app.study import QUICK_S, Study
 from cosymp.methods import METHODS
 from cosymp.reference import reference_final
-from cosymp.scenes import SCENES, lead
+from cosymp.scenes import SCENES, first, lead
 
 APP = pathlib.Path(__file__).resolve().parent.parent / "app"
 
@@ -82,6 +83,9 @@ def test_picking_a_scene_opens_its_first_view_which_shows_the_claim(scene):
     s.scene = scene
     opened = first_state(SCENES[scene])
     assert {k: getattr(s, k) for k in opened} == opened and s.view == "compare"
+    info = study.SceneInfo(study=s)
+    info.__panel__()
+    assert html.escape(first(SCENES[scene]).doc) in info._look.object, "the header says what to look for"
     by_kind = {METHODS[e.method].preserves_at(0.5): e for e in s.results.entries}
     kept, lost = by_kind["symplectic"], by_kind["none"]
     band, drift = (np.abs(e.comparison.run.H_ext[:, 0]) for e in (kept, lost))
