@@ -217,11 +217,11 @@ def test_11_play_opens_at_its_start(page):
     page.check()
 
 
-def test_12_the_damped_map_shows_the_error_on_a_sequential_log_scale(page):
+def test_12_the_damped_map_shows_the_energy_error_on_a_sequential_log_scale(page):
     page.open(query(scene="damped", view="map"))
     page.page.locator("b.wpstatus").filter(has_text="done in").wait_for(timeout=120_000)
     # The status and the redrawn map reach the page in separate messages: wait for the map itself.
-    heat = wait_for_plot(page, "error_final of midpoint on damped", lines=0)
+    heat = wait_for_plot(page, "H_ext_max_abs of midpoint on damped", lines=0)
     assert heat["y_mapper"] == "LogColorMapper"
     page.check()
 

@@ -274,7 +274,10 @@ SCENE = ChargedScene(
              "methods agree at h = 0.01.",
              "midpoint", "rk4", 0.01, 20.0, values={"B0": 0.05, "eps": 10.0, "w": 50.0}, hard=True),
     ),
-    map_axes=(("h", 0.001, 0.1, True), ("B0", 0.0, 2.0, False)),
+    # Growth over the field's modulation w x eps: the parametric-resonance tongues of the gyration
+    # (near w = 2.2 and 1.1 at B0 = 1). Over h x B0 it was stripes of noise, and at the first view's
+    # T = 300 a log h axis down to 0.001 took 6e7 steps (15 s).
+    map_axes=(("w", 0.0, 6.0, False), ("eps", 0.0, 1.0, False)),
     gauges=GAUGES,
     mechanical=mechanical,
     gauge_map=gauge_map,
