@@ -1,7 +1,7 @@
 """Presets: the cases the scenes declare (scenes.base.Case: the paper's figures with their
 printed parameters, the Kapitza pendulum, and the hard cases, where the paper's gentle
-parameters are left behind; tests/test_hard_cases.py runs each), as links; and the URL that
-holds the app's state.
+parameters are left behind; tests/test_registry.py runs each), as links; each scene's first view,
+which its Scene menu entry opens (`first_state`); and the URL that holds the app's state.
 
 A preset is a set of app-state values; its link is the URL that opens the app in that state,
 in the one format the app writes: text as it is, numbers and the scene's parameters as JSON,
@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass, field
 from urllib.parse import urlencode
 
-from cosymp.scenes import SCENES, cases
+from cosymp.scenes import SCENES, cases, first
 
 URL_NAMES = {"scene": "scene", "method": "method", "other": "vs", "theta": "theta", "h": "h", "T": "T",
              "values": "p", "view": "view"}
@@ -83,15 +83,29 @@ class Preset:
         return "?" + urlencode(items)
 
 
+def case_state(scene, case):
+    """The app-state values that open a scene's case."""
+    return {"scene": scene.name, "method": case.method, "other": case.other, "h": case.h, "T": case.T,
+            "values": dict(case.values), "view": case.view}
+
+
+def first_state(scene):
+    """What picking the scene from the Scene menu opens: its first view (Case.first), as the
+    comparison's inputs (the shown tab stays)."""
+    state = case_state(scene, first(scene))
+    del state["view"]
+    return state
+
+
 def _preset(scene, case):
-    state = {"scene": scene.name, "method": case.method, "other": case.other, "h": case.h, "T": case.T,
-             "values": dict(case.values), "view": case.view}
-    return Preset(case.name, case.doc, state, case.T_long, HARD if case.hard else PAPER, case.fails)
+    return Preset(case.name, case.doc, case_state(scene, case), case.T_long, HARD if case.hard else PAPER,
+                  case.fails)
 
 
 def _presets():
-    """The lead case first, then the paper's figures, then the hard cases, each in registry order."""
-    ordered = sorted(cases(), key=lambda sc: (not sc[1].lead, sc[1].hard))
+    """The paper's figures, then the hard cases, each in registry order. A scene's first view is no
+    link: its Scene menu entry opens it (the lead's is the app's own first view)."""
+    ordered = sorted((sc for sc in cases() if not sc[1].first), key=lambda sc: sc[1].hard)
     return tuple(_preset(scene, case) for scene, case in ordered)
 
 

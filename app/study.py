@@ -24,13 +24,13 @@ from cosymp.reference import fine_steps, reference_states
 from cosymp.report import render
 from cosymp.report.scene import command as report_command
 from cosymp.report.scene import scene_report
-from cosymp.scenes import SCENES
+from cosymp.scenes import SCENES, first
 from cosymp.study import compare_until_failure as study_until_failure
 from cosymp.study import with_reference
 
 from .jobs import Job, Note
 from .plotting import equation, note, push
-from .presets import HARD, PAPER, PRESETS, URL_NAMES, rounded
+from .presets import HARD, PAPER, PRESETS, URL_NAMES, first_state, rounded
 from .warmup import first_view
 
 LIVE_MAX_STEPS = 2_000_000
@@ -186,6 +186,10 @@ class Study(Job):
     `values` holds the scene parameters that differ from the scene's defaults (the URL carries
     it); `inputs` is a Parameterized mirroring the scene's parameters, for the controls. Either
     can be changed; the other follows. `view` names the shown tab (main.py checks it).
+
+    A change of scene (the Scene menu) opens the scene's first view (Case.first): its methods, h, T
+    and values, but for those changed with it; the shown tab stays. A study made with a scene (a
+    link) takes the scene's defaults, the paper's values, for whatever the link does not name.
     """
 
     scene = param.Selector(default=FIRST_VIEW["scene"], objects={s.title: k for k, s in SCENES.items()},
@@ -278,18 +282,8 @@ class Study(Job):
             return
         changed = {e.name for e in events}
         scene = self.scene_obj
-        if "scene" in changed:
-            updates = {k: getattr(scene, k) for k in ("h", "T") if k not in changed}
-            if "values" not in changed:
-                updates["values"] = {}
-            switched = []
-            for name, fallback in (("method", "midpoint"), ("other", "rk4")):
-                reason = METHODS[getattr(self, name)].refusal(scene)
-                if reason:
-                    updates[name] = fallback
-                    switched.append(f"{reason}; switched to {fallback}")
-            if switched:  # one message: a second one at once replaced the first on the page
-                self.say(Note("info", " | ".join(switched)))
+        if "scene" in changed:  # the scene's first view, but for what was changed with it
+            updates = {k: v for k, v in first_state(scene).items() if k not in changed}
             try:
                 scene.values(updates.get("values", self.values))
             except InputError as err:
@@ -323,7 +317,9 @@ class Study(Job):
         if self._good is None:
             return
         self._set({k: v for k, v in self._good.items() if getattr(self, k) != v})
-        if self.inputs is not None and self.scene == self._good["scene"]:
+        if not isinstance(self.inputs, inputs_class(self.scene)):  # refused with a change of scene
+            self.inputs = self._make_inputs()
+        else:
             self._syncing = True
             try:
                 self.inputs.param.update(**self.scene_obj.values(self.values))
@@ -558,9 +554,9 @@ class ChoiceControl(Control):
 
 
 class SceneInfo(pn.viewable.Viewer):
-    """The scene's title, summary, equations, what to look for, and its notes. A scene change
-    rewrites the panes' text (and shows as many equation panes as the scene has), so the page's
-    layout is not rebuilt."""
+    """The scene's title, summary, equations, what to look for (in the scene, and in its first view),
+    and its notes. A scene change rewrites the panes' text (and shows as many equation panes as the
+    scene has), so the page's layout is not rebuilt."""
 
     study = param.ClassSelector(class_=Study)
 
@@ -581,7 +577,8 @@ class SceneInfo(pn.viewable.Viewer):
         for i, pane_ in enumerate(self._equations):
             shown = i < len(s.equations)
             pane_.param.update(object=f"${s.equations[i]}$" if shown else "", visible=shown)
-        self._look.object = (f"<p class='lookfor'><b>Look for:</b> {html.escape(s.look_for)}</p>"
+        self._look.object = (f"<p class='lookfor'><b>Look for:</b> {html.escape(s.look_for)}<br><b>First view</b> "
+                             f"(what the Scene menu opens): {html.escape(first(s).doc)}</p>"
                              + (f"<ul class='notes'>{notes}</ul>" if notes else ""))
 
 

@@ -15,7 +15,7 @@ from playwright.sync_api import expect
 from served import ARTIFACTS, CHROMIUM, START_TIMEOUT_S, TABLE_JS, TABLE_ROW, WAIT_MS, query
 
 from app.features.stabilitymap import significant
-from cosymp.scenes import SCENES
+from cosymp.scenes import SCENES, first
 
 pytestmark = [
     pytest.mark.slow,
@@ -60,7 +60,8 @@ def test_switching_scenes_rebuilds_controls_and_plots(page):
     page.open(query(scene="damped"))
     page.page.locator("select").first.select_option(label=SCENES["charged"].title)
     expect(page.page.locator("h2:visible").first).to_contain_text("Charged particle")
-    page.page.wait_for_function(f"() => JSON.stringify(({TABLE_JS})()).includes('20,000')")
+    opened = first(SCENES["charged"])  # the menu opens the scene's first view
+    page.page.wait_for_function(f"() => JSON.stringify(({TABLE_JS})()).includes('{round(opened.T / opened.h):,}')")
     assert page.page.get_by_text("beta(t): 'paper', 'constant' or an expression of t").count() == 1
     assert "scene=charged" in page.page.url
     page.page.wait_for_timeout(1000)

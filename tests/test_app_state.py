@@ -1,6 +1,7 @@
 """The app's states and views, without a server or a browser: what each view plots, the study's
 validation, the follower views, the long run, presets, and the memory budget."""
 import gc
+import html
 import json
 import math
 import pathlib
@@ -14,10 +15,11 @@ import pytest
 from app import jobs, memory, plotting, study
 from app.features import cloud, common, gauges, longrun, orbits, structure, theta
 from app.plotting import DENSE, POINTS, Raster
-from app.presets import PRESETS, URL_NAMES, parse_items, query_items
+from app.presets import PRESETS, URL_NAMES, case_state, first_state, parse_items, query_items
 from app.study import QUICK_S, Study
+from cosymp.methods import METHODS
 from cosymp.reference import reference_final
-from cosymp.scenes import SCENES
+from cosymp.scenes import SCENES, first, lead
 
 APP = pathlib.Path(__file__).resolve().parent.parent / "app"
 
@@ -57,14 +59,46 @@ def test_the_first_view_shows_rk4_drifting_out_of_the_symplectic_band():
     """What a newcomer sees first: RK4's |H + p_t| starts below midpoint's band, drifts, and ends
     well above it, while the band stays put (its maximum over the first and the last tenth)."""
     s = Study()
-    assert (s.scene, s.method, s.other, s.h, s.T) == ("modulated", "midpoint", "rk4", 0.2, 2000.0)
+    assert (s.scene, s.method, s.other, s.h, s.T) == ("modulated", "midpoint", "rk4", 0.25, 1000.0)
     midpoint, rk4 = (np.abs(e.comparison.run.H_ext[:, 0]) for e in s.results.entries)
     tenth = len(midpoint) // 10
     assert midpoint[-tenth:].max() < 1.2 * midpoint[:tenth].max(), "the symplectic band does not grow"
     assert rk4[:tenth // 2].max() < midpoint.max() < rk4[-1] / 5, "RK4 starts inside the band and ends far above it"
     text = common.verdict(s.results)
     assert "rk4's |H + p_t| leaves midpoint's bounded band" in text and "rk4 drifts, midpoint does not" in text
-    assert s.state() == {**PRESETS[0].state, "theta": 0.5}
+    assert s.state() == {**case_state(*lead()), "theta": 0.5}
+
+
+@pytest.mark.parametrize("scene", list(SCENES))
+def test_picking_a_scene_opens_its_first_view_which_shows_the_claim(scene):
+    """The Scene menu opens the scene's first view (Case.first), and its runs show the claim: the
+    structure-preserving method's |H + p_t| stays in its band (over the run's last tenth at most
+    BAND_GROWTH times its maximum over the first), while the other method's maximum over the last
+    tenth is above that band's maximum over the whole run and well above its own over the first
+    tenth (it drifted out), as the verdict says. The error is split: where the structure-preserving
+    method's trajectory error is the larger (a lower order), the verdict says so, and its energy error
+    stays under 1% of the energy (its orbit keeps its size: what it loses is phase)."""
+    s = Study()
+    s.scene = next(name for name in SCENES if name != scene)
+    s.scene = scene
+    opened = first_state(SCENES[scene])
+    assert {k: getattr(s, k) for k in opened} == opened and s.view == "compare"
+    info = study.SceneInfo(study=s)
+    info.__panel__()
+    assert html.escape(first(SCENES[scene]).doc) in info._look.object, "the header says what to look for"
+    by_kind = {METHODS[e.method].preserves_at(0.5): e for e in s.results.entries}
+    kept, lost = by_kind["symplectic"], by_kind["none"]
+    band, drift = (np.abs(e.comparison.run.H_ext[:, 0]) for e in (kept, lost))
+    tenth = len(band) // 10
+    assert band[-tenth:].max() <= common.BAND_GROWTH * band[:tenth].max(), "the band stays put"
+    assert drift[-tenth:].max() > band.max(), "the other method leaves the band within T"
+    assert drift[-tenth:].max() > 1.5 * drift[:tenth].max(), "it drifts"
+    text = common.verdict(s.results)
+    assert f"{lost.label} drifts, {kept.label} does not" in text
+    errors = [float(np.nanmax(e.comparison.error)) for e in (kept, lost)]
+    assert ("trajectory error is the larger" in text) == (errors[0] > errors[1])
+    if errors[0] > errors[1]:
+        assert band.max() < 0.01 * abs(kept.comparison.run.pt[0, 0]), "the energy error is small: the rest is phase"
 
 
 def test_the_final_error_without_an_exact_flow_is_the_reports_and_the_verdict_says_what_it_means():
@@ -79,16 +113,17 @@ def test_the_final_error_without_an_exact_flow_is_the_reports_and_the_verdict_sa
         assert common.numbers(s.results)[e.label][3] == plotting.fmt(e.final_error)
     midpoint, rk4 = s.results.entries
     assert midpoint.final_error > 10 * rk4.final_error
-    assert (f"{midpoint.label}'s final error is the larger, though ({midpoint.final_error:.2g} against "
-            f"{rk4.final_error:.2g})") in common.verdict(s.results)
-    assert "so relative to a reference run, rk8 at h" in orbits.remark(s.results)
+    largest = [float(np.nanmax(e.comparison.error)) for e in (midpoint, rk4)]
+    assert (f"{midpoint.label}'s trajectory error is the larger, though (up to {largest[0]:.2g} against "
+            f"{largest[1]:.2g} over the run)") in common.verdict(s.results)
+    assert "relative to a reference run, rk8 at h" in orbits.remark(s.results)
     figs = shown_figures(drawn(orbits.OrbitsView(s)))
     assert plotted(figs.error).size > 0
     for e in s.results.entries:
         assert e.comparison.error[0] == 0.0 and e.comparison.error[-1] == e.final_error
     assert "Nothing bounds it over longer runs" in common.verdict(s.results), "no claim the data do not show"
     s.T = 1e4  # 2e6 steps at h 0.005: its reference would be too long for a live view
-    assert all(e.final_error is None for e in s.results.entries) and "final error is the larger" not in common.verdict(s.results)
+    assert all(e.final_error is None for e in s.results.entries) and "error is the larger" not in common.verdict(s.results)
     assert "more than 2e+05 rk8 steps" in orbits.remark(s.results)
     damped = Study(scene="damped")
     assert [e.final_error for e in damped.results.entries] == [e.comparison.error[-1] for e in damped.results.entries]
@@ -125,14 +160,15 @@ def test_switching_scenes_rebinds_the_controls_and_rebuilds_the_portraits():
     s.scene = "charged"
     names = [p.name for p in SCENES["charged"].params]
     assert [n for n in s.inputs.param if n != "name"] == names
-    assert (s.h, s.T, s.values) == (SCENES["charged"].h, SCENES["charged"].T, {})
+    opened = first_state(SCENES["charged"])
+    assert (s.h, s.T, s.values) == (opened["h"], opened["T"], opened["values"])
     shown = controls.shown()
     assert [c.name for c in shown] == names and {id(c) for c in shown} <= set(map(id, pool))  # no new widgets
     assert list(controls.__panel__().objects) == column, "nor a reordered column"
     assert isinstance(shown[5], study.TextControl) and shown[5].widget.label.startswith("beta(t)")
     assert isinstance(shown[6], study.ChoiceControl) and shown[6].widget.options == list(
         next(p for p in SCENES["charged"].params if p.name == "gauge").choices)
-    assert shown[2].slider.label == "B0" and shown[2].slider.value == s.inputs.B0 == 0.05
+    assert shown[2].slider.label == "B0" and shown[2].slider.value == s.inputs.B0 == opened["values"]["B0"]
     assert [id(o) for o in column[:-1] if o.visible] == [id(c.layout) for c in shown]  # the rest of the pool hidden
     assert column[-1].object.count("<li>") == len(names) and "<b>beta</b>: beta(t): &#x27;paper&#x27;" in column[-1].object
     assert s.results.scene == "charged" and not s.results.dense
@@ -212,18 +248,23 @@ def test_discarded_controls_do_not_keep_the_study_alive():
     assert ref() is None
 
 
-def test_a_scene_without_the_method_falls_back_and_says_so():
+def test_picking_a_scene_opens_its_first_views_methods_and_keeps_what_was_changed_with_it():
+    """A scene picked from the menu opens its first view's methods too (boris and the splitting
+    methods, which other scenes refuse, do not carry over); an input changed in the same update is
+    kept; a method the scene refuses, asked for with it, is refused and the last good state stays."""
     s = Study(scene="charged", method="boris")
     assert s.results.entries[0].method == "boris"
     s.scene = "damped"
-    assert s.method == "midpoint" and s.message.level == "info" and "boris" in s.message.text
-    assert s.results.scene == "damped"
+    assert (s.method, s.other) == (first_state(SCENES["damped"])["method"], first_state(SCENES["damped"])["other"])
+    assert s.message is None and s.results.scene == "damped"
     s = Study(scene="modulated", method="blanes-moan6", other="leapfrog")
-    said = []
-    s.param.watch(lambda e: said.append(s.message.text), "message")
-    s.scene = "charged"
-    assert (s.method, s.other) == ("midpoint", "rk4") and len(said) == 1, "both switches in one message"
-    assert "'blanes-moan6'" in said[0] and "'leapfrog'" in said[0] and "not separable" in said[0]
+    s.param.update(scene="damped", T=120.0)
+    assert (s.scene, s.method, s.T) == ("damped", "midpoint", 120.0) and s.results.T == 120.0
+    good = s.results
+    s.param.update(scene="charged", method="leapfrog")
+    assert s.message.level == "error" and "not separable" in s.message.text
+    assert (s.scene, s.method, s.results) == ("damped", "midpoint", good)
+    assert type(s.inputs) is study.inputs_class("damped"), "the controls show the scene put back"
 
 
 @pytest.mark.parametrize("change, needle", [
@@ -248,7 +289,8 @@ def test_bad_input_keeps_the_last_good_state_and_says_what_to_change(change, nee
 def test_a_link_with_a_bad_step_shows_the_scenes_own_run_and_says_so():
     for query in ({"h": -1.0}, {"T": 1e300}):
         s = Study(**query)
-        assert s.results is not None and (s.h, s.T) == (0.2, 2000.0), "the first view"
+        _, case = lead()
+        assert s.results is not None and (s.h, s.T) == (case.h, case.T), "the first view"
         assert s.message.level == "error"
         s = Study(scene="damped", **query)
         assert s.results is not None and (s.h, s.T) == (SCENES["damped"].h, SCENES["damped"].T)
@@ -491,8 +533,8 @@ def test_long_run_of_a_diverging_setup_stops_with_data_up_to_there():
 
 def test_the_long_runs_default_horizon_reaches_its_end_on_every_scene_at_its_defaults():
     """100 times the study's T, at most the paper's long horizon: on damped at the scene's γ = 0.2 the
-    paper's 5e5 (a γ = 2e-4 run) overflowed at t ≈ 7000; the first view keeps the paper's 2e5."""
-    assert longrun.LongRun(Study()).T_long == 2e5
+    paper's 5e5 (a γ = 2e-4 run) overflowed at t ≈ 7000; the first view's, 1e5, is within the paper's 2e5."""
+    assert longrun.LongRun(Study()).T_long == 100 * lead()[1].T < SCENES["modulated"].T_long
     for name in SCENES:
         s = Study(scene=name)
         lr = longrun.LongRun(s)

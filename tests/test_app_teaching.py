@@ -13,6 +13,7 @@ from served import CHROMIUM, START_TIMEOUT_S, TABLE_JS, TABLE_ROW, query
 
 from app.presets import PRESETS
 from cosymp.report.style import METHOD_COLORS
+from cosymp.scenes import lead
 
 pytestmark = [
     pytest.mark.slow,
@@ -63,7 +64,7 @@ def test_01_the_first_view_teaches_and_a_is_drawn_over_b(page):
     each orbit bold, B's dashes over A (where the orbits fill one band, A hid B)."""
     page.open()
     expect(page.page.locator(".verdict")).to_contain_text("rk4's |H + p_t| leaves midpoint's bounded band")
-    energy = wait_for_plot(page, "max |H + p_t| per bin")
+    energy = wait_for_plot(page, "energy error: max |H + p_t| per bin")
     portrait = wait_for_plot(page, "phase portrait", lines=4)
     a = (METHOD_COLORS["midpoint"], True)
     b = (METHOD_COLORS["rk4"], False)
@@ -211,16 +212,16 @@ def test_10_the_url_holds_only_valid_state_in_one_format(page):
 
 def test_11_play_opens_at_its_start(page):
     page.open(query(view="play"))
-    expect(page.page.locator("p.clock")).to_have_text("t = 0 of 2000")
+    expect(page.page.locator("p.clock")).to_have_text(f"t = 0 of {lead()[1].T:g}")
     assert page.page.evaluate(RANGE_JS) == [[0, 200, 0]]
     page.check()
 
 
-def test_12_the_damped_map_shows_the_error_on_a_sequential_log_scale(page):
+def test_12_the_damped_map_shows_the_energy_error_on_a_sequential_log_scale(page):
     page.open(query(scene="damped", view="map"))
     page.page.locator("b.wpstatus").filter(has_text=re.compile("done in|by this server")).wait_for(timeout=120_000)
     # The status and the redrawn map reach the page in separate messages: wait for the map itself.
-    heat = wait_for_plot(page, "error_final of midpoint on damped", lines=0)
+    heat = wait_for_plot(page, "H_ext_max_abs of midpoint on damped", lines=0)
     assert heat["y_mapper"] == "LogColorMapper"
     page.check()
 
@@ -245,5 +246,5 @@ def test_15_a_link_with_a_bad_step_shows_the_first_view_and_says_so(page):
         page.page.locator(".notyf__toast").first.wait_for()
         page.page.wait_for_selector(TABLE_ROW)
         wait_for_plot(page, "phase portrait")
-        expect(page.page.get_by_label("Step h")).to_have_value("0.2")
+        expect(page.page.get_by_label("Step h")).to_have_value(f"{lead()[1].h:g}")
     page.check()

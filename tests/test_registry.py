@@ -15,7 +15,7 @@ from cosymp.errors import RunError
 from cosymp.integrate import Setup, simulate
 from cosymp.kernels.registry import FAMILIES, family
 from cosymp.methods import LEAPFROG, METHODS, compose
-from cosymp.scenes import SCENES, cases, lead
+from cosymp.scenes import SCENES, cases, first, lead
 from cosymp.workprecision import rhs_per_step
 
 CASES = cases()
@@ -31,10 +31,16 @@ def test_the_compiled_layer_imports_no_scene():
                 assert not any("scenes" in n for n in names), (path.name, node.lineno)
 
 
-def test_exactly_one_case_leads():
+def test_exactly_one_case_leads_and_every_scene_declares_one_first_view():
+    """The lead is its scene's first view; each scene's first view opens in Orbits, on a run that
+    reaches T (tests/test_app_state.py checks what each shows)."""
     assert sum(c.lead for _, c in CASES) == 1
-    _, case = lead()
-    assert not case.hard and case.view == "compare"
+    scene, case = lead()
+    assert first(scene) is case
+    for s in SCENES.values():
+        firsts = [c for c in s.cases if c.first]
+        assert len(firsts) == 1 and first(s) is firsts[0], s.name
+        assert not firsts[0].hard and not firsts[0].fails and firsts[0].view == "compare"
 
 
 @pytest.mark.parametrize("scene", list(SCENES))

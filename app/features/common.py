@@ -44,9 +44,10 @@ BAND_GROWTH = 2.0
 
 def verdict(runs):
     """One sentence on what the |H + p_t| plot shows, from the data: where a method that preserves
-    nothing leaves the band of one that is symplectic, or that it has not (yet) at this T. The band is
-    called bounded only when the data show it: its maximum over the run's last tenth is at most
-    BAND_GROWTH times that over its first tenth (an adiabatic change of the scene can widen it)."""
+    nothing leaves the band of one that is symplectic (and how far above it its maximum over the
+    run's last tenth is), or that it has not (yet) at this T. The band is called bounded only when
+    the data show it: its maximum over the run's last tenth is at most BAND_GROWTH times that over
+    its first tenth (an adiabatic change of the scene can widen it)."""
     kept, lost = {}, {}
     for e in runs.entries if runs is not None else ():
         if e.comparison is None:
@@ -72,25 +73,32 @@ def verdict(runs):
         return (f"<p class='verdict'>Up to T = {runs.T:g}, {html.escape(n)}'s |H + p_t| (at most {drift.max():.2g}) "
                 f"stays below {what}: at this h and T the error of {html.escape(n)}'s higher order is the smaller. "
                 "Nothing bounds it over longer runs; whether it leaves the band there depends on the scene (the "
-                f"Long run tab measures it).{phase_note(ke, le)}</p>")
+                f"Long run tab measures it).{phase_note(ke, le, bounded)}</p>")
+    end = float(np.nanmax(drift[-max(len(drift) // 10, 1):]))  # not its last value: |H + p_t| oscillates
     return (f"<p class='verdict'>{html.escape(n)}'s |H + p_t| leaves {what} at t ≈ {lr.t[above[0]]:.3g} and ends "
-            f"{drift[-1] / band:.3g}× above it at t = {lr.t[-1]:g}: "
+            f"{end / band:.3g}× above it (its maximum over the run's last tenth, to t = {lr.t[-1]:g}): "
             + (f"{html.escape(n)} drifts, {html.escape(p)} does not." if bounded else
-               f"{html.escape(n)} drifts faster than {html.escape(p)}.") + f"{phase_note(ke, le)}</p>")
+               f"{html.escape(n)} drifts faster than {html.escape(p)}.") + f"{phase_note(ke, le, bounded)}</p>")
 
 
-def phase_note(kept, lost):
-    """A sentence when the symplectic method's final error is the larger one (a method of lower
-    order): what it keeps is the band of H + p_t, not the trajectory."""
-    a, b = kept.final_error, lost.final_error
-    if a is None or b is None or not a > b:
+def phase_note(kept, lost, bounded):
+    """A sentence when the symplectic method's trajectory error is the larger one over the run (a
+    method of lower order; over the run, not at T: an error of phase comes back near 0 each time
+    the phase has gone round): it says so, and, when its energy error stays in a bounded band (its
+    orbit keeps its size), that what it loses is phase: structure preservation bounds the energy
+    error, not the phase along the orbit."""
+    if kept.final_error is None or lost.final_error is None:  # a run stopped early, or no reference
+        return ""
+    a, b = (float(np.nanmax(e.comparison.error)) for e in (kept, lost))
+    if not a > b:
         return ""
     orders = [METHODS[e.method].order_at(0.5 if e.comparison.setup.theta is None else e.comparison.setup.theta)
               for e in (kept, lost)]
-    return (f" {html.escape(kept.label)}'s final error is the larger, though ({a:.2g} against {b:.2g}): of order "
-            f"{orders[0]} against "
-            f"{orders[1]}, {html.escape(kept.label)} follows the trajectory less closely at this h; what structure "
-            "preservation buys is the band of H + p_t, not the trajectory.")
+    p = html.escape(kept.label)
+    return (f" {p}'s trajectory error is the larger, though (up to {a:.2g} against {b:.2g} over the run): of order "
+            f"{orders[0]} against {orders[1]}, {p} "
+            + ("runs out of phase along its orbit sooner at this h. What structure preservation bounds is the energy "
+               "error, not the phase." if bounded else "follows the trajectory less closely at this h."))
 
 
 NUMBER_ROWS = ("max |H + p_t|", "max |det M - 1|", "max |M^T J M - J|", "final relative error", "steps",

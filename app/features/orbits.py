@@ -1,5 +1,6 @@
-"""Orbits: phase portraits of both methods, |H~| = |H + p_t| over the run, the relative error
-against the exact flow, and the numbers over every step. It shows the sidebar's comparison."""
+"""Orbits: phase portraits of both methods, their error split in two (the energy error |H~| =
+|H + p_t| over the run, and the trajectory's relative error against the exact flow or a reference
+run), and the numbers over every step. It shows the sidebar's comparison."""
 import numpy as np
 import pandas as pd
 import panel as pn
@@ -48,10 +49,12 @@ class Figures:
                 fig = figure("")
                 self.portraits.append((slot, fig, Raster(fig) if dense else Pair(fig, start=True)))
                 self.tails.append(Pair(fig, width=3.2, emphasis=True))
-        self.energy = Pair(figure("max |H + p_t| per bin (exact: 0)", "t", "|H + p_t|", logy=True))
-        # One title for every scene (a changed title makes the page lay out the tab): what the error
-        # is measured against is said below the plots (remark).
-        self.error = Pair(figure("relative error to the reference", "t", "|z − z_ref| / |z_ref|", logy=True))
+        # The error split in two, each titled by what it measures: the energy error (what structure
+        # preservation bounds) beside the trajectory error (which also counts the phase, where order
+        # wins). One title for every scene (a changed title makes the page lay out the tab): what
+        # the trajectory is measured against is said below the plots (remark).
+        self.energy = Pair(figure("energy error: max |H + p_t| per bin", "t", "|H + p_t| (absolute)", logy=True))
+        self.error = Pair(figure("trajectory error: |z − z_ref| / |z_ref|", "t", "relative error", logy=True))
         figs = [f for _, f, _ in self.portraits] + [self.energy.fig, self.error.fig]
         self.grid = grid(*[pane(f) for f in figs], ncols=3 if len(figs) in (3, 6) else 2)
 
@@ -92,18 +95,24 @@ class Figures:
             reset_ranges(p.fig)
 
 
+SPLIT = ("<p class='doc'>Two errors. <b>Energy</b>: |H + p_t|, 0 for the exact flow, which a structure-preserving "
+         "method keeps in a bounded band. <b>Trajectory</b>: {against}, which also counts how far along its orbit "
+         "each method has run (its phase): there a higher order wins.</p>")
+
+
 def remark(runs):
-    """What the errors are measured against: the exact flow, or a reference run for a scene without
-    one (or nothing, when that run would be too long for a live view)."""
+    """The two errors the plots split, and what the trajectory is measured against: the exact flow,
+    or a reference run for a scene without one (or nothing, when that run would be too long for a
+    live view)."""
     if SCENES[runs.scene].has_flow:
-        return "<p class='doc'>Errors: relative to the exact flow.</p>"
+        return SPLIT.format(against="relative to the exact flow")
     against = next((e.comparison.against for e in runs.ok if e.comparison.against), None)
     if against is None:
         return (f"<p class='doc'>No closed-form flow for '{runs.scene}', and its reference would take more than "
-                f"{LIVE_REFERENCE_STEPS:.0e} rk8 steps here: no error plot; the report or <code>cosymp run</code> "
-                "measure the final error.</p>")
-    return (f"<p class='doc'>Errors: no closed-form flow for '{runs.scene}', so relative to a reference run, "
-            f"{against} (as in the report).</p>")
+                f"{LIVE_REFERENCE_STEPS:.0e} rk8 steps here: no trajectory error plot; the report or "
+                "<code>cosymp run</code> measure the final error.</p>")
+    return SPLIT.format(against=f"relative to a reference run, {against}, as in the report (no closed-form flow "
+                                f"for '{runs.scene}')")
 
 
 class OrbitsView(FeatureView):

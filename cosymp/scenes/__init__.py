@@ -21,3 +21,9 @@ def cases():
 def lead():
     """The (scene, case) marked as the lead: the app's first view."""
     return next((s, c) for s, c in cases() if c.lead)
+
+
+def first(scene):
+    """The case a scene declares as its first view (Case.first): what the app opens when the scene
+    is picked from its menu."""
+    return next(c for c in scene.cases if c.first)

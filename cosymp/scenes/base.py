@@ -99,14 +99,18 @@ class SceneKernel:
 
 @dataclass(frozen=True)
 class Case:
-    """A run worth opening, declared by its scene: one of the paper's figures, or a hard case
-    (hard=True: where the paper's gentle parameters are left behind). The app offers each as a
-    link, and tests/test_hard_cases.py runs every one.
+    """A run worth opening, declared by its scene: one of the paper's figures, a hard case
+    (hard=True: where the paper's gentle parameters are left behind), or the scene's first view.
+    The app offers the figures and hard cases as links, and tests/test_registry.py runs every case.
 
     method, other: the method and the one it is compared with; h, T, values: the run (values
     differ from the scene's defaults); view: what shows it ('compare', 'long', 'gauges' or
     'play'); T_long: the long run's horizon; fails: the methods whose run stops early by design
-    (with its message); lead: the app's first view (one case of all the scenes').
+    (with its message); first: the scene's first view, what the app opens when the scene is picked
+    from its Scene menu (one case per scene, shown in Orbits: a structure-preserving method whose
+    |H + p_t| stays in a bounded band while the other's drifts out of it within T, at a live
+    view's cost; its doc says what to look for); lead: the app's first view (one case of all the
+    scenes', also its scene's first).
     """
 
     name: str
@@ -120,6 +124,7 @@ class Case:
     T_long: float = None
     hard: bool = False
     fails: tuple = ()
+    first: bool = False
     lead: bool = False
 
 

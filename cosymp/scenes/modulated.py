@@ -23,10 +23,11 @@ def coef(P, t, C, r):
 SCENE = Scene(
     name="modulated",
     title="Oscillator with time-dependent potential",
-    summary=("H = ((1 + ε sin(αt)) q² + p²)/2, the paper's Sec. 4.2; the paper's ε = 0.0035 and α = 0.0008 "
-             "are the scene's defaults."),
+    summary=("H = ((1 + ε sin(αt)) q² + p²)/2, the paper's Sec. 4.2. Its figures' ε = 0.0035 and α = 0.0008 are "
+             "the scene's defaults (the Paper figures links); the Scene menu opens a strong modulation, ε = 0.2 and "
+             "α = 0.05."),
     look_for="A slowly modulated stiffness: the structure-preserving methods keep H + p_t oscillating around 0; "
-             "RK4 loses energy at every step, so its H + p_t drifts away and its orbit spirals in. Large ε with α "
+             "RK4 loses energy at every step, so its H + p_t drifts away (over long runs its orbit spirals in). Large ε with α "
              "near 2 (or 1, 2/3, ...) puts it in a Mathieu resonance tongue.",
     equations=(r"H(q,p,t) = \tfrac12\big((1+\varepsilon\,\sin(\alpha t))\,q^2 + p^2\big)",
                (r"\dot q = p,\quad \dot p = -(1+\varepsilon\,\sin(\alpha t))\,q,\quad "
@@ -48,11 +49,11 @@ SCENE = Scene(
     paper=Paper("Section 4.2: harmonic oscillator with time-dependent potential", T_long=2e5),
     cases=(
         Case("What structure preservation buys",
-             "The app's first view: a strongly modulated oscillator (ε 0.2, α 0.05) at h 0.2 to T "
-             "2000. RK4 (fourth order, 4 stages per step) starts with the smaller |H + p_t| but loses "
-             "energy at every step: it passes the symplectic midpoint rule's band near t = 185 and "
-             "ends ten times above it, while the band stays put.",
-             "midpoint", "rk4", 0.2, 2000.0, values={"eps": 0.2, "alpha": 0.05}, lead=True),
+             "A strongly modulated oscillator (ε 0.2, α 0.05) at h 0.25 to T 1000, the app's first view. "
+             "Look at |H + p_t|: RK4 (fourth order, 4 stages per step) starts with the smaller "
+             "one but loses energy at every step, passes the symplectic midpoint rule's band near "
+             "t = 94 and ends nine times above it, while the band stays put.",
+             "midpoint", "rk4", 0.25, 1000.0, values={"eps": 0.2, "alpha": 0.05}, first=True, lead=True),
         Case("Fig. time-dependent potential (T 50)",
              "A slowly modulated stiffness (ε 0.0035, α 0.0008, h 0.1, T 50): over so short a run both "
              "methods keep H + p_t small; the long run shows RK4 drifting.",
