@@ -51,9 +51,9 @@ def map_axes(scene):
 
 def first_measure(scene):
     """What a scene's first map shows: the measure it declares (Scene.map_measure), growth unless
-    growth says nothing (the damped oscillator grows at γ/2 with every method, and every structure-
-    preserving method's growth on the decaying one is 0 to round-off: their errors show the methods
-    apart)."""
+    growth says nothing (the damped oscillator grows at γ/2 with every method: max |H + p_t| shows
+    the methods apart, its error at T is noise from cell to cell; every structure-preserving
+    method's growth on the decaying one is 0 to round-off: their errors show them apart)."""
     return scene.map_measure
 
 
