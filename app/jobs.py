@@ -193,17 +193,16 @@ class Job(param.Parameterized):
         that it runs in the handler of the change that asked for it: its results then reach the page
         in the same message as the change's other effects, and the page is laid out once, not twice.
         A remembered result is quick."""
-        return self._recallable() is not None
-
-    def _recallable(self):
-        """The remembered (result, when) of the current inputs, or None."""
         if not self.KEEP:
-            return None
+            return False
         try:
-            inputs = self._inputs()
+            return self._remembered(self._inputs()) is not None
         except InputError:
-            return None
-        key = None if inputs is None else self._key(inputs)
+            return False
+
+    def _remembered(self, inputs):
+        """The remembered (result, when) of these inputs, or None."""
+        key = self._key(inputs) if self.KEEP and inputs is not None else None
         return None if key is None else REMEMBERED.get((self.KIND, key))
 
     def start(self):
@@ -275,9 +274,9 @@ class Job(param.Parameterized):
             inputs = self._inputs()
             if inputs is None:
                 return None
-            key = self._key(inputs) if self.KEEP else None
-            if (self.KIND, key) in REMEMBERED:
-                self._recalled(inputs, *REMEMBERED[(self.KIND, key)])
+            kept = self._remembered(inputs)
+            if kept is not None:
+                self._recalled(inputs, *kept)
                 return None
             lease = memory.BUDGET.lease(self._bytes(inputs), self.WHAT)
         except InputError as err:
@@ -324,11 +323,10 @@ class Job(param.Parameterized):
         key = self._key(run.inputs) if self.KEEP else None
         if key is None:
             return
-        kind = [k for k in REMEMBERED if k[0] == self.KIND and k != (self.KIND, key)]
-        for old in kind[:max(0, len(kind) + 1 - self.KEEP)]:
-            del REMEMBERED[old]
-        REMEMBERED.pop((self.KIND, key), None)
+        REMEMBERED.pop((self.KIND, key), None)  # the newest last
         REMEMBERED[(self.KIND, key)] = (self._kept(run), datetime.datetime.now())
+        for old in [k for k in REMEMBERED if k[0] == self.KIND][:-self.KEEP]:
+            del REMEMBERED[old]
 
     # ---- what subclasses may adjust
 

@@ -36,6 +36,15 @@ from .warmup import first_view
 LIVE_MAX_STEPS = 2_000_000
 QUICK_S = 0.03  # a comparison expected to take at most this long is computed in the change's handler
 SECONDS_PER_STEP = {}  # (scene, method, other) -> what its last comparison in this server took per step
+
+
+def expected_quick(rate, h, T):
+    """Whether a computation costing `rate` seconds per step (None: not known) is expected to take at
+    most QUICK_S over T/h steps."""
+    try:
+        return rate is not None and rate * check_step(h, T) <= QUICK_S
+    except InputError:
+        return False
 LIVE_REFERENCE_STEPS = 200_000  # a fine rk8 reference for the final error takes at most this many steps (~0.1 s)
 CLOUD_POINTS = {True: 32, False: 64}
 DELTA = 1e-4
@@ -351,11 +360,7 @@ class Study(Job):
     def quick(self):
         """Whether the last comparison of this scene and pair of methods in this server, scaled to this
         many steps, took at most QUICK_S (a comparison's cost per step depends on little else)."""
-        rate = SECONDS_PER_STEP.get((self.scene, self.method, self.other))
-        try:
-            return rate is not None and rate * check_step(self.h, self.T) <= QUICK_S
-        except InputError:
-            return False
+        return expected_quick(SECONDS_PER_STEP.get((self.scene, self.method, self.other)), self.h, self.T)
 
     def _done_in(self, inputs, elapsed):
         """A live comparison keeps no status line; its cost per step is noted (`quick`)."""

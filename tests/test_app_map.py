@@ -235,3 +235,8 @@ def test_a_map_any_page_computed_is_shown_at_once_to_the_next_that_asks(tongue):
     assert not other.quick()
     other.start()
     assert other.run is not None and other.status.startswith("done") and other.result.values[other.measure].shape == (8, 5)
+    for n in range(2, 2 + StabilityMap.KEEP):  # the server keeps the newest KEEP maps
+        other.param.update(nx=n, ny=2)
+        other.start()
+    kept = [key for kind, key in jobs.REMEMBERED if kind == StabilityMap.KIND]
+    assert [k.shape for k in kept] == [(n, 2) for n in range(2, 2 + StabilityMap.KEEP)]

@@ -6,11 +6,11 @@ import panel as pn
 import param
 
 from cosymp.drive import Drive
-from cosymp.errors import InputError, RunError
+from cosymp.errors import RunError
 from cosymp.integrate import Setup, check_step
 
 from ..plotting import FLOOR, SLOTS, Curves, Pair, figure, grid, note, pane, vline
-from ..study import QUICK_S, SECONDS_PER_STEP, Runs, comparison_bytes, failure_note, run_pair
+from ..study import SECONDS_PER_STEP, Runs, comparison_bytes, expected_quick, failure_note, run_pair
 from .base import Feature, FeatureView, Follower
 from .cloud import Snapshots, loops
 from .common import color_key
@@ -104,10 +104,7 @@ class ThetaLesson(Follower):
         visit of the tab: its eight figures then come with the tab, not in a second message)."""
         s = self.study
         rate = LESSON_SECONDS_PER_STEP.get(s.scene, SECONDS_PER_STEP.get((s.scene, s.method, s.other)))
-        try:
-            return rate is not None and rate * check_step(s.h, s.T) <= QUICK_S
-        except InputError:
-            return False
+        return expected_quick(rate, s.h, s.T)
 
     def _done_in(self, inputs, elapsed):
         """A live view keeps no status line; its cost per step is noted (`quick`)."""
