@@ -27,7 +27,7 @@ from .warmup import prepare
 
 ASSETS = Path(__file__).resolve().parent.parent / "assets"
 NOTIFY_MS = {"error": 8000, "warning": 6000, "info": 4000}
-AHEAD_MS = 300  # a tab is built ahead at most this often (App._ahead)
+AHEAD_MS = 100  # one step of building tabs ahead at most this often (App._ahead)
 AHEAD_IDLE_S = 1.0  # after the last change in any page of the server
 GONE_MS = 5000  # a page whose browser has gone this long stops (App._watch)
 COPY_LINK_JS = """
@@ -96,6 +96,7 @@ class App(param.Parameterized):
                 self.states[f.name].param.watch(lambda e: self._write_url(), list(f.url))
         self._touch()
         self._ahead_done = set()
+        self._ahead_steps = self._ahead_work()
         self.study.param.watch(self._touch, [*Study.INPUTS, "view"])
         pn.state.onload(self._flush)
         pn.state.on_session_destroyed(self._stop)
@@ -194,22 +195,34 @@ class App(param.Parameterized):
         App.last_change = time.monotonic()
 
     def _ahead(self):
-        """Build one more tab ahead of its first showing, hidden, while the server is idle (no
-        change in any page for AHEAD_IDLE_S, nothing computing in this one): a first visit then shows
-        it at once (it cost 0.5-1.8 s to build there, most of it the browser's), at the price of the server's time (0.1-0.4 s a
-        tab, in idle time) and the page's memory. One tab every AHEAD_MS, those of features with
-        `ahead`; the shown tab's view also gets its turn (Orbits builds the figures of other scenes'
-        shapes)."""
+        """Build the tabs ahead of their first showing, hidden, while the server is idle (no change
+        in any page for AHEAD_IDLE_S, nothing computing in this one): a first visit then shows it at
+        once (it cost 0.5-1.8 s to build there, most of it the browser's), at the price of the
+        server's idle time and the page's memory. One step every AHEAD_MS (`_ahead_work`): a change
+        that comes while one runs waits for that step only (a whole tab at once took the server
+        0.3-0.45 s, and a scene change made in the first seconds of a page waited 0.6 s)."""
         if self._stopped or self._closed():
             return
         busy = any(j.running for j in self.jobs)
-        todo = [f.name for f in FEATURES if f.ahead and f.name not in self._ahead_done]
-        if todo and not busy and time.monotonic() - App.last_change >= AHEAD_IDLE_S:
-            self._ahead_done.add(todo[0])
-            push(lambda: self._build(todo[0]))
-            todo = todo[1:]
-        if todo:
-            self._next_ahead()
+        if not busy and time.monotonic() - App.last_change >= AHEAD_IDLE_S:
+            step = next(self._ahead_steps, None)
+            if step is None:
+                return
+            push(step)
+        self._next_ahead()
+
+    def _ahead_work(self):
+        """The steps of building ahead, 0.1-0.2 s each, per feature with `ahead`: its layout built,
+        its layout joining the page (unless its tab was shown meanwhile), then its view's own steps
+        (`FeatureView.ahead`: the data at hand drawn)."""
+        for i, f in enumerate(FEATURES):
+            if not f.ahead:
+                continue
+            view, box = self.views[f.name], self.tabs[i]
+            self._ahead_done.add(f.name)
+            yield view.__panel__
+            yield lambda box=box, view=view: len(box) or box.append(view)
+            yield from view.ahead()
 
     def _closed(self):
         """Whether the page's browser has gone (its session lingers until the server's next check
@@ -221,12 +234,6 @@ class App(param.Parameterized):
     def _next_ahead(self):
         if self._doc is not None and self._doc.session_context is not None:  # served: no idle time otherwise
             self._doc.add_timeout_callback(self._ahead, AHEAD_MS)
-
-    def _build(self, name):
-        box = self.tabs[[f.name for f in FEATURES].index(name)]
-        if not len(box):
-            box.append(self.views[name])
-        self.views[name].ahead()
 
     def _report(self):
         """The report file of the current comparison; bad input becomes a message and a file saying so."""

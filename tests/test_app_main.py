@@ -374,7 +374,8 @@ def test_a_page_that_closes_while_written_to_leaves_no_traceback_and_other_failu
 
 
 def test_tabs_are_built_ahead_one_at_a_time_while_the_page_is_idle_and_start_no_measurement():
-    """App._ahead builds one more tab per call, hidden, once the server (every page) has been idle
+    """App._ahead takes one more step of building the tabs per call (a layout, its joining the page,
+    its data drawn), hidden, once the server (every page) has been idle
     AHEAD_IDLE_S: its layout, and the data at hand drawn; nothing is computed for it (the θ lesson, the long run
     and the map start on their first showing: computed ahead, every page would hold their memory
     leases). Gauges and Work-precision are not built ahead. Orbits builds the figures of the
@@ -396,8 +397,11 @@ def test_tabs_are_built_ahead_one_at_a_time_while_the_page_is_idle_and_start_no_
     gone._ahead()
     assert not gone._ahead_done, "a page whose browser has gone builds nothing ahead (its session lingers)"
     gone._stop(None)
-    for _ in range(len(FEATURES)):
+    app._ahead()
+    assert app._ahead_done == {"compare"} and len(app.tabs[0]) == 1, "one step at a time: Orbits' data"
+    for _ in range(4 * len(FEATURES)):
         app._ahead()
+    assert next(app._ahead_steps, None) is None, "every step taken"
     assert app._ahead_done == {f.name for f in FEATURES if f.ahead} == set(names) - {"gauges", "workprecision"}
     assert [len(app.tabs[i]) for i in range(len(names))] == [n not in ("gauges", "workprecision") for n in names]
     assert app.tabs.active == names.index("compare") and app.study.view == "compare"

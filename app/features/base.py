@@ -60,8 +60,12 @@ class FeatureView(pn.viewable.Viewer):
             self.redraw()
 
     def ahead(self):
-        """Ahead of the tab's first showing (its layout built, hidden): draw the data at hand, so
-        that a first visit shows it at once."""
+        """The steps (callables, each a short piece of the server's time) to take ahead of the tab's
+        first showing, its layout built and hidden: draw the data at hand, so that a first visit
+        shows it at once."""
+        return [self._draw_stale]
+
+    def _draw_stale(self):
         if self._stale:
             self.redraw()
 

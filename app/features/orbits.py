@@ -1,13 +1,15 @@
 """Orbits: phase portraits of both methods, their error split in two (the energy error |H~| =
 |H + p_t| over the run, and the trajectory's relative error against the exact flow or a reference
 run), and the numbers over every step. It shows the sidebar's comparison."""
+from functools import partial
+
 import numpy as np
 import pandas as pd
 import panel as pn
 
 from cosymp.scenes import SCENES
 
-from ..plotting import SLOTS, Pair, Raster, figure, grid, note, pane, path, peaks, push, reset_ranges, table
+from ..plotting import SLOTS, Pair, Raster, figure, grid, note, pane, path, peaks, reset_ranges, table
 from ..study import LIVE_REFERENCE_STEPS
 from .base import Feature, FeatureView
 from .common import color_key, comparisons, names, numbers, over_time, phase_axes, tail, verdict, zcols
@@ -139,13 +141,10 @@ class OrbitsView(FeatureView):
 
     def ahead(self):
         """Besides the data, the figures of every scene's usual shape (one or two degrees of
-        freedom), hidden: a scene change to another shape then shows them, and builds nothing."""
-        super().ahead()
-        push(self._all_shapes)
-
-    def _all_shapes(self):
-        for name in SCENES:
-            self.figures(shape(name, False, False))
+        freedom), hidden, one shape a step: a scene change to another shape then shows them, and
+        builds nothing."""
+        shapes = dict.fromkeys(shape(name, False, False) for name in SCENES)
+        return super().ahead() + [partial(self.figures, key) for key in shapes]
 
     def update(self):
         runs = self.study.results
