@@ -402,13 +402,15 @@ def test_the_energy_plot_starts_at_the_first_step_and_zeros_sit_below_the_data()
 
 def test_the_numbers_give_the_integration_time_and_the_time_with_diagnostics():
     """The report's "integration time (s)" is the run alone; the app showed the comparison's whole
-    time (with its nearby runs, loop and tangent maps) as "time (s)": 10-200x apart. Both now, named."""
+    time (with its nearby runs, loop and tangent maps) as "time (s)": 10-200x apart. Both now, named. The
+    comparison's is its thread's CPU time: the two methods and the reference run side by side in threads, and
+    their wall times (0.002-0.15 s for the same comparison) told which thread waited, not what each cost."""
     s = Study(scene="damped")
     cols = common.numbers(s.results)
     rows = dict(zip(cols[next(iter(cols))], cols["midpoint"]))
     c = s.results.entries[0].comparison
     assert rows["integration time (s)"] == plotting.fmt(c.run.wall_s)
-    assert rows["time with diagnostics (s)"] == plotting.fmt(c.wall_s) and c.wall_s > c.run.wall_s
+    assert rows["CPU time with diagnostics (s)"] == plotting.fmt(c.cpu_s) and c.cpu_s > 0
 
 
 def test_the_structure_and_cloud_views_plot_the_rigorous_checks():

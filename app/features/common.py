@@ -102,7 +102,7 @@ def phase_note(kept, lost, bounded):
 
 
 NUMBER_ROWS = ("max |H + p_t|", "max |det M - 1|", "max |M^T J M - J|", "final relative error", "steps",
-               "integration time (s)", "time with diagnostics (s)")
+               "integration time (s)", "CPU time with diagnostics (s)")
 
 
 def numbers(runs):
