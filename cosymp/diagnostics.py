@@ -153,9 +153,13 @@ def paper_volume_form(traj, members=None):
     return np.linalg.det(np.swapaxes(cols, 1, 2))
 
 
-def separation_omega(traj, i=1, j=2):
-    """omega(delta^i, delta^j) of separations from member 0: constant for a symplectic map."""
+def separation_omega(traj, i=1, j=None):
+    """omega(delta^i, delta^j) of separations from member 0: constant for a symplectic map. By
+    default the members perturbed along q_1 and along p_1 (`nearby_states`: member k along
+    coordinate k - 1), a conjugate pair, so that it starts at delta^2 in any dimension (q_1 and
+    q_2, the second and third members in two degrees of freedom, give 0 throughout)."""
     z = traj.z
+    j = 1 + traj.q.shape[-1] if j is None else j
     return omega(z[:, i] - z[:, 0], z[:, j] - z[:, 0])
 
 

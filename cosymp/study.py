@@ -35,7 +35,8 @@ class Comparison:
     run: members 0 (the trajectory) and 1..2n+1 (nearby states, delta apart).
     det_dev, symp_dev: |det M_k - 1| and ||M_k^T J M_k - J|| of the one-step maps (rigorous).
     paper_omega, paper_volume: the paper's estimators from one-step increments (as printed).
-    separation_omega: omega(z1 - z0, z2 - z0) / delta^2 (1 for a symplectic map).
+    separation_omega: omega(z_q1 - z0, z_p1 - z0) / delta^2 of the members perturbed along q_1 and p_1
+        (1 for a symplectic map).
     cloud, cloud_area: the carried loop and its enclosed area over its initial area.
     error: the relative error |z - z_ref| / |z_ref| against the exact flow where the scene has one,
         or against a reference run given to `with_reference`; else None. against: which of them.
