@@ -118,6 +118,8 @@ def figure(title, x_label="t", y_label="", logx=False, logy=False, height=HEIGHT
     for axis, log in ((fig.xaxis, logx), (fig.yaxis, logy)):
         axis.formatter = CustomJSTickFormatter(code=LOG_TICKS if log else TICKS)
         axis.axis_label_text_font_style = "normal"
+        if log:  # a log axis whose labels skip decades piled its minor ticks into black bars
+            axis.minor_tick_line_color = None
     fig.min_border_left = 78  # room for "1.2e-15" and the axis label when new data brings wider ticks
     fig.js_on_change("tags", CustomJS(code=RESET_RANGES))
     return fig

@@ -318,6 +318,27 @@ def test_a_message_queued_while_another_batch_is_written_is_still_sent():
         document._WRITE_BLOCK.pop(doc, None)
     assert sent == [["one"], ["two"]]
 
+    from tornado.websocket import WebSocketClosedError
+
+    def closed(conn, msg):
+        raise WebSocketClosedError()  # tornado's write to a page that has closed
+
+    async def gone():
+        logged = []
+        asyncio.get_running_loop().set_exception_handler(lambda loop, context: logged.append(context))
+        document.extra_socket_handlers[Socket] = closed
+        document.schedule_write_events(doc, [connection], ["after the page closed"])
+        for _ in range(5):
+            await asyncio.sleep(0)
+        return logged
+
+    try:
+        assert asyncio.run(gone()) == [], "a closed page's queued message is no error"
+    finally:
+        del document.extra_socket_handlers[Socket]
+        document._WRITE_MSGS.pop(doc, None)
+        document._WRITE_BLOCK.pop(doc, None)
+
 
 def test_a_page_that_closes_while_written_to_leaves_no_traceback_and_other_failures_still_show(monkeypatch):
     """app/page.closed_writes_seen: a page closes while Panel writes a message to it (in three parts,

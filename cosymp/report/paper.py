@@ -153,7 +153,7 @@ def _gauges(scene):
         "each gauge (per-gauge runs). Positions and mechanical momenta Π = p − eA agree across gauges up to the "
         "method's error; the canonical momenta p differ by e ∇χ, as they must."),
         ("Corrections: each gauge is built here from its gauge function χ (A' = A + ∇χ, φ' = φ − ∂_t χ), not "
-        "transcribed; the paper's printed Landau Hamiltonian has the scalar potential's sign flipped and lacks e."),
+        "transcribed from the paper's printed Hamiltonians:"),
         *scene.notes,
     ]
     items = []

@@ -23,9 +23,8 @@ def coef(P, t, C, r):
 SCENE = Scene(
     name="modulated",
     title="Oscillator with time-dependent potential",
-    summary=("H = ((1 + ε sin(αt)) q² + p²)/2, the paper's Sec. 4.2. Its figures' ε = 0.0035 and α = 0.0008 are "
-             "the scene's defaults (the Paper figures links); the Scene menu opens a strong modulation, ε = 0.2 and "
-             "α = 0.05."),
+    summary=("H = ((1 + ε sin(αt)) q² + p²)/2, the paper's Sec. 4.2 (its figures: ε = 0.0035, α = 0.0008, the "
+             "scene's defaults)."),
     look_for="A slowly modulated stiffness: the structure-preserving methods keep H + p_t oscillating around 0; "
              "RK4 loses energy at every step, so its H + p_t drifts away (over long runs its orbit spirals in). Large ε with α "
              "near 2 (or 1, 2/3, ...) puts it in a Mathieu resonance tongue.",
