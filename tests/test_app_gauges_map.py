@@ -1,0 +1,58 @@
+"""The Gauges tab away from the charged particle, and what the Stability map says it was computed
+with: without a server, and in the browser."""
+import shutil
+from urllib.parse import parse_qsl, urlparse
+
+import pytest
+from playwright.sync_api import expect
+from served import CHROMIUM, START_TIMEOUT_S, query
+
+from app.features import gauges
+from app.presets import PRESETS, URL_NAMES, parse_items
+from app.study import Study
+from cosymp.methods import METHODS
+from cosymp.scenes import SCENES
+
+
+def in_browser(test):
+    """A browser test: slow, and skipped without Chromium."""
+    for mark in (pytest.mark.slow, pytest.mark.skipif(not shutil.which(CHROMIUM), reason=f"no Chromium at {CHROMIUM}"),
+                 pytest.mark.timeout(START_TIMEOUT_S + 120)):
+        test = mark(test)
+    return test
+
+
+GAUGE_FIGURE = next(p for p in PRESETS if p.state["view"] == "gauges")
+
+
+def test_the_gauge_figure_is_the_paper_figure_link_that_opens_the_gauges_tab():
+    assert GAUGE_FIGURE.name.startswith("Fig. gauge") and gauges.gauge_figure().name == GAUGE_FIGURE.name
+
+
+@pytest.mark.parametrize("scene", [s for s in SCENES if not SCENES[s].has_gauges])
+def test_the_gauges_tab_of_another_scene_opens_the_paper_s_gauge_figure(scene):
+    """The study ends in the state of the sidebar's link to the figure, whatever it held before: here
+    already at the figure's T and without scene values, which alone would not be changes."""
+    s = Study(scene=scene, T=GAUGE_FIGURE.state["T"], view="gauges")
+    assert s.values == {} and s.T == GAUGE_FIGURE.state["T"]
+    gauges.open_gauge_figure(s)
+    assert {k: getattr(s, k) for k in GAUGE_FIGURE.state} == GAUGE_FIGURE.state
+    assert (s.results.scene, s.results.h, s.results.T) == ("charged", 0.001, 20.0)
+
+
+@in_browser
+def test_in_the_browser_the_gauges_tab_opens_the_paper_s_gauge_figure(page):
+    """From Kapitza's pendulum at the figure's T: the button lands on the figure's state (as its link
+    in Paper figures has it) with the Gauges tab shown and its plots drawn."""
+    page.open(query(scene="kapitza", T=GAUGE_FIGURE.state["T"], view="gauges"))
+    page.page.locator("button:visible", has_text="Open the").click()
+    expect(page.page.get_by_label("Step h")).to_have_value(f"{GAUGE_FIGURE.state['h']:g}")
+    expect(page.page.locator(".bk-tab.bk-active")).to_have_text("Gauges")
+    label = METHODS[GAUGE_FIGURE.state["method"]].label(None)
+    expect(page.page.locator("p", has_text="Method:").first).to_contain_text(label)
+    page.page.wait_for_url(lambda url: "charged" in url and "symplectic-euler" in url)
+    state, bad = parse_items(dict(parse_qsl(urlparse(page.page.url).query)), URL_NAMES)
+    assert not bad and {k: state[k] for k in GAUGE_FIGURE.state} == GAUGE_FIGURE.state
+    page.page.wait_for_timeout(1500)
+    page.shot("gauges-away-opens-the-figure")
+    page.check()
