@@ -1,5 +1,6 @@
 """The Gauges tab away from the charged particle, and what the Stability map says it was computed
 with: without a server, and in the browser."""
+import shlex
 import shutil
 from urllib.parse import parse_qsl, urlparse
 
@@ -8,10 +9,13 @@ from playwright.sync_api import expect
 from served import CHROMIUM, START_TIMEOUT_S, query
 
 from app.features import gauges
+from app.features import stabilitymap as maps
+from app.features.stabilitymap import StabilityMap
 from app.presets import PRESETS, URL_NAMES, parse_items
 from app.study import Study
+from cosymp import cli, sweep
 from cosymp.methods import METHODS
-from cosymp.scenes import SCENES
+from cosymp.scenes import SCENES, first
 
 
 def in_browser(test):
@@ -38,6 +42,44 @@ def test_the_gauges_tab_of_another_scene_opens_the_paper_s_gauge_figure(scene):
     gauges.open_gauge_figure(s)
     assert {k: getattr(s, k) for k in GAUGE_FIGURE.state} == GAUGE_FIGURE.state
     assert (s.results.scene, s.results.h, s.results.T) == ("charged", 0.001, 20.0)
+
+
+@pytest.mark.parametrize("scene", list(SCENES))
+def test_the_map_says_every_value_its_cells_share_as_they_run_them(scene):
+    """Each scene's first map, at a sidebar h and T of its first view's halves: the status names the
+    sidebar's h and T where they are not varied, no value of a varied name (the plan's h is the
+    scene's default where h is varied), and every other scene parameter with its value."""
+    s = Study()
+    s.scene = scene
+    case = first(SCENES[scene])
+    s.param.update(h=case.h / 2, T=case.T / 2)
+    m = StabilityMap(s, nx=2, ny=2)
+    plan = m.planned()
+    text = m._describe(plan)
+    varied = {a.name for a in plan.axes}
+    used = {"h": s.h, "T": s.T, **s.scene_obj.values(s.values)}
+    if METHODS[s.method].takes_theta:
+        used["theta"] = s.theta
+    for name, value in used.items():
+        if name in varied:
+            assert f" {name} = " not in text, (name, text)
+        else:
+            assert f" {name} = {maps.value_text(value)}," in text + ",", (name, text)
+    assert "h" not in varied or f"h = {SCENES[scene].h:g}" not in text
+
+
+@pytest.mark.parametrize("scene", list(SCENES))
+def test_the_map_s_command_line_runs_the_map_shown(scene):
+    """`cosymp sweep` given the shown command plans the same grid with the same shared values (it
+    refused a varied h also given as --h: 'h' is both given a fixed value and varied)."""
+    s = Study()
+    s.scene = scene
+    m = StabilityMap(s, nx=2, ny=2)
+    plan = m.planned()
+    args = cli.parser().parse_args(shlex.split(maps.map_command(plan))[1:])
+    again = sweep.plan(args.scene, args.method, args.vary, args.measure, dict(args.set), args.theta, args.h, args.T)
+    assert (again.axes, again.measures) == (plan.axes, plan.measures)
+    assert maps.shared_values(again) == maps.shared_values(plan)
 
 
 @in_browser

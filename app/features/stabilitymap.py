@@ -22,6 +22,7 @@ from bokeh.transform import transform
 from cosymp import sweep
 from cosymp.errors import InputError
 from cosymp.methods import METHODS
+from cosymp.scenes import SCENES
 
 from ..jobs import Job
 from ..plotting import FLOOR, LOG_TICKS, TICKS, figure, note, pane, source
@@ -66,6 +67,26 @@ def map_bytes(points):
 
 def significant(x):
     return float(f"{x:.{SIGNIFICANT}g}")
+
+
+def run_values(plan):
+    """{name: value} of h, T and θ (where the method takes it) as every cell of a plan runs them,
+    less the varied ones (a varied name's plan value is the scene's default, which no cell uses)."""
+    varied = {a.name for a in plan.axes}
+    run = {"h": plan.h, "T": plan.T, "theta": plan.theta}
+    return {k: v for k, v in run.items() if v is not None and k not in varied}
+
+
+def shared_values(plan):
+    """{name: value} of everything every cell of a plan runs with but its varied names: h, T, θ
+    (`run_values`) and each of the scene's parameters (its default unless the plan sets it)."""
+    varied = {a.name for a in plan.axes}
+    scene = SCENES[plan.scene].values(dict(plan.values))
+    return {**run_values(plan), **{k: v for k, v in scene.items() if k not in varied}}
+
+
+def value_text(v):
+    return f"{v:g}" if isinstance(v, float) else str(v)
 
 
 class StabilityMap(Job):
@@ -150,10 +171,9 @@ class StabilityMap(Job):
 
     def _describe(self, plan):
         (ax, ay) = plan.axes
-        fixed = ", ".join(f"{k} = {v}" for k, v in plan.values)
-        return (f"{plan.measures[0]} of {plan.method} on {plan.scene}" + (f" ({fixed})" if fixed else "")
-                + f": {ax.name} {ax.values[0]:g}…{ax.values[-1]:g} × {ay.name} {ay.values[0]:g}…{ay.values[-1]:g}, "
-                f"{plan.size} cells, h = {plan.h:g}, T = {plan.T:g} where not varied")
+        shared = ", ".join(f"{k} = {value_text(v)}" for k, v in shared_values(plan).items())
+        return (f"{plan.measures[0]} of {plan.method} on {plan.scene}: {ax.name} {ax.values[0]:g}…{ax.values[-1]:g} "
+                f"× {ay.name} {ay.values[0]:g}…{ay.values[-1]:g}, {plan.size} cells, each with {shared}")
 
     def _started(self, plan):
         self.status = f"running: {self._describe(plan)}"
@@ -197,9 +217,9 @@ def map_command(plan):
     fixed = "".join(f" --set {k}={v}" for k, v in plan.values)
     vary = "".join(f" --vary {a.name}={a.values[0]:g}:{a.values[-1]:g}:{len(a.values)}" + (":log" if a.log else "")
                    for a in plan.axes)
-    theta = f" --theta {plan.theta:g}" if plan.theta is not None else ""
-    return (f"cosymp sweep {plan.scene} --method {plan.method}{vary} --measure {' '.join(plan.measures)} "
-            f"--h {plan.h:g} --T {plan.T:g}{theta}{fixed} -o map.csv")
+    run = "".join(f" --{k} {v:g}" for k, v in run_values(plan).items())
+    return (f"cosymp sweep {plan.scene} --method {plan.method}{vary} --measure {' '.join(plan.measures)}"
+            f"{run}{fixed} -o map.csv")
 
 
 def edges(values, log):
