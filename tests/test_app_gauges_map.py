@@ -10,7 +10,7 @@ from served import CHROMIUM, START_TIMEOUT_S, query
 
 from app.features import gauges
 from app.features import stabilitymap as maps
-from app.features.stabilitymap import StabilityMap
+from app.features.stabilitymap import StabilityMap, StabilityMapView
 from app.presets import PRESETS, URL_NAMES, parse_items
 from app.study import Study
 from cosymp import cli, sweep
@@ -80,6 +80,29 @@ def test_the_map_s_command_line_runs_the_map_shown(scene):
     again = sweep.plan(args.scene, args.method, args.vary, args.measure, dict(args.set), args.theta, args.h, args.T)
     assert (again.axes, again.measures) == (plan.axes, plan.measures)
     assert maps.shared_values(again) == maps.shared_values(plan)
+
+
+def test_a_map_computed_before_a_change_of_the_sidebar_says_so_until_computed_again():
+    """The map is computed on Compute map, not on every change of the sidebar: after one, the shown
+    map's status names the values it was computed with, and a line says what changed since; its
+    cells are not sent again for a change of the inputs alone."""
+    s = Study(scene="modulated")
+    m = StabilityMap(s, nx=3, ny=2)
+    view = StabilityMapView(s, m)
+    s.view = "map"
+    view.__panel__()
+    view.shown()
+    shown, h = m.result, s.h
+    plot = view._drawn[0]
+    cells = plot.source.data
+    assert shown is not None and view.since.object == "" and f"h = {h:g}," in m.setting
+    s.h = h / 2
+    assert m.result is shown and f"h = {h:g}," in m.setting
+    assert f"now h = {h / 2:g})" in view.since.object and plot.source.data is cells
+    m.start()
+    assert m.result is not shown and view.since.object == "" and f"h = {h / 2:g}," in m.setting
+    m.nx = 4
+    assert "of its axes or measure" in view.since.object
 
 
 @in_browser

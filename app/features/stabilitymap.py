@@ -305,6 +305,21 @@ MAP_TEXT = ("<p>One measure of the sidebar's method over a grid of two varied qu
             "<b>Click a cell</b> to open that run in the Orbits view.</p>")
 
 
+def since_text(shown, asked):
+    """What the shown map (its plan) was not computed with that the sidebar and the map's controls
+    now ask for (`asked`, None if they ask for no map): '' when they ask for the shown map. The map
+    is computed on Compute map (or a first visit), not on every change of the sidebar."""
+    if shown is None or asked is None:
+        return ""
+    old, new = shared_values(shown), shared_values(asked)
+    if (shown.axes, shown.measures, old) == (asked.axes, asked.measures, new):
+        return ""
+    changed = ", ".join(f"{k} = {value_text(v)}" for k, v in new.items() if old.get(k) != v)
+    return (f"<p class='doc since'><b>Computed before the latest changes</b> "
+            f"({'now ' + html.escape(changed) if changed else 'of its axes or measure'}): press Compute map "
+            "to compute it with them.</p>")
+
+
 def map_failures(result):
     if result is None:
         return ""
@@ -326,7 +341,11 @@ class StabilityMapView(FeatureView):
         self.box = pn.Column(sizing_mode="stretch_width")
         self.text = note("")
         self.failures = note("")
-        self.follow(m, "result")
+        self.since = note("")
+        self._drawn = None
+        self.follow(m, "result", "running", "measure", *(f"{a}{k}" for a in "xy" for k in ("", "_start", "_stop", "_log")),
+                    "nx", "ny")
+        self.follow(self.study, "h", "T", "theta", "values")
 
         def axis(prefix):
             p = m.param
@@ -337,7 +356,7 @@ class StabilityMapView(FeatureView):
                           pn.widgets.Checkbox.from_param(p[f"{prefix}_log"], margin=(30, 10, 10, 10)))
 
         return pn.Column(self.text, pn.widgets.Select.from_param(m.param.measure, width=200), axis("x"), axis("y"),
-                         row, status, self.box, self.failures, sizing_mode="stretch_width")
+                         row, status, self.since, self.box, self.failures, sizing_mode="stretch_width")
 
     def wanted(self):
         if self.state.result is None and not self.state.busy:
@@ -346,10 +365,12 @@ class StabilityMapView(FeatureView):
     def update(self):
         m = self.state
         result = m.result
-        plan = result.plan if result else m.planned()
+        asked = m.planned()
+        plan = result.plan if result else asked
         self.text.object = MAP_TEXT.format(command=html.escape(map_command(plan)) if plan else
                                            "cosymp sweep SCENE --vary NAME=START:STOP:NUM ...")
         self.failures.object = map_failures(result)
+        self.since.object = "" if m.running else since_text(result.plan if result else None, asked)
         if result is None:
             self.box.objects = [note("<p class='doc'>No map yet: choose the axes and press Compute map.</p>")]
             return
@@ -358,7 +379,9 @@ class StabilityMapView(FeatureView):
         if kind not in self.plots:
             self.plots[kind] = MapPlot(*kind, m.open_cell)
         plot = self.plots[kind]
-        plot.set(result)
+        if self._drawn is None or self._drawn[0] is not plot or self._drawn[1] is not result:
+            plot.set(result)  # not again when only the inputs changed: the text is redrawn, not the cells
+            self._drawn = (plot, result)
         if self.box.objects != [plot.pane]:
             self.box.objects = [plot.pane]
 
