@@ -1,9 +1,13 @@
 """The Gauges tab away from the charged particle, and what the Stability map says it was computed
 with: without a server, and in the browser."""
+import json
+import math
+import re
 import shlex
 import shutil
 from urllib.parse import parse_qsl, urlparse
 
+import numpy as np
 import pytest
 from playwright.sync_api import expect
 from served import CHROMIUM, START_TIMEOUT_S, query
@@ -120,4 +124,41 @@ def test_in_the_browser_the_gauges_tab_opens_the_paper_s_gauge_figure(page):
     assert not bad and {k: state[k] for k in GAUGE_FIGURE.state} == GAUGE_FIGURE.state
     page.page.wait_for_timeout(1500)
     page.shot("gauges-away-opens-the-figure")
+    page.check()
+
+
+CELL_COLOURS_JS = """(title) => {
+    // The palette entry BokehJS's own colour mapper gives each cell of the heat map with this title.
+    for (const doc of Bokeh.documents) for (const m of doc.all_models) {
+        if (!["Figure", "Plot"].includes(m.type) || !m.title || !m.title.text.startsWith(title)) continue;
+        const r = m.renderers.find(r => r.glyph && r.glyph.fill_color && r.glyph.fill_color.transform);
+        const mapper = r.glyph.fill_color.transform, src = r.data_source;
+        const data = src.data instanceof Map ? Object.fromEntries(src.data) : src.data;
+        if (!data.z || !data.z.length) return null;
+        const palette = mapper.palette.map(c => c.toLowerCase());
+        const entry = Array.from(mapper.v_compute(data.z)).map(c => palette.indexOf("#" + (c >>> 8).toString(16).padStart(6, "0")));
+        return {x: Array.from(data.x), y: Array.from(data.y), entry, low: mapper.low, n: palette.length};
+    }
+    return null;
+}"""
+
+
+@in_browser
+def test_in_the_browser_kapitza_s_map_colours_the_falling_pendulum_apart_from_the_held_one(page):
+    """Kapitza's first view, then its Stability map (30 x 30, as it opens): as BokehJS colours them,
+    the cells well below a nu = sqrt(2) w0 (the pendulum falls) are a median 38 palette entries (of
+    256) above those well beyond it (it stays up; below the upper instability); on the linear scale
+    from the smallest to the largest growth they were 3 entries apart."""
+    case = first(SCENES["kapitza"])
+    page.open(query(scene="kapitza", method=case.method, vs=case.other, h=case.h, T=case.T, view="map"))
+    page.page.locator("b.wpstatus").filter(has_text=re.compile("done in|by this server")).wait_for(timeout=120_000)
+    title = f"growth of {case.method} on kapitza"
+    page.page.wait_for_function(f"() => ({CELL_COLOURS_JS})({json.dumps(title)})", timeout=60_000)
+    cells = page.page.evaluate(CELL_COLOURS_JS, title)
+    entry, nu, a = (np.array(cells[k]) for k in ("entry", "x", "y"))
+    assert len(entry) == 900 and entry.min() >= 0 and cells["low"] == 1 / case.T
+    falls = (a > 0) & (a * nu < 0.8 * math.sqrt(2))
+    up = (a * nu > 1.25 * math.sqrt(2)) & (a < 0.4)
+    assert np.median(entry[falls]) - np.median(entry[up]) >= 30, (np.median(entry[falls]), np.median(entry[up]))
+    page.shot("kapitza-map")
     page.check()

@@ -12,7 +12,6 @@ from bokeh.models import (
     ColorBar,
     CustomJSTickFormatter,
     HoverTool,
-    LinearColorMapper,
     LogColorMapper,
     TapTool,
 )
@@ -25,7 +24,7 @@ from cosymp.methods import METHODS
 from cosymp.scenes import SCENES
 
 from ..jobs import Job
-from ..plotting import FLOOR, LOG_TICKS, TICKS, figure, note, pane, source
+from ..plotting import FLOOR, LOG_TICKS, figure, note, pane, source
 from ..study import soft_range, theta_for
 from .base import Feature, FeatureView
 from .workprecision import run_controls
@@ -250,23 +249,42 @@ def cells(result):
             "x": np.asarray(ax.values)[i], "y": np.asarray(ay.values)[j]}
 
 
-ROUND_OFF = 1e-12  # a linear map whose every cell is within this of 0 is drawn as 0
+def colour_range(plan, z):
+    """(low, high) of a map's log colour scale for its finite values z, or None if it has none.
+
+    growth from 1/T (of the grid's longest run): ln σ_max = 1, one e-fold of the product of the
+    one-step maps over the run. A bounded map's growth is the logarithm of its oscillation's stretch
+    over T (a few e-folds at most; round-off where every map is a rotation), a contraction's is
+    negative, an instability's is many e-folds: at or below one, the lowest colour, and the colours
+    above count e-folds on a log scale. On a linear scale from the smallest to the largest value,
+    Kapitza's map was one colour but for its top rows (the upper instability of the inverted
+    position, growth up to 12 against 0.15-0.7 where the pendulum falls and 0.01-0.2 where it stays
+    up), and noise of 1e-16 was drawn as structure where every cell was round-off. The other
+    measures, deviations over decades: their smallest to largest value."""
+    if not len(z):
+        return None
+    if plan.measures[0] == "growth":
+        low = 1.0 / max(next((a.values for a in plan.axes if a.name == "T"), (plan.T,)))
+    else:
+        low = float(z.min())
+    high = float(z.max())
+    return low, high if high > low else 10.0 * low
 
 
 class MapPlot:
-    """The heat map for one pair of axis kinds (linear or log): quads coloured by the measure, a
-    colour bar, hover, and a click that calls on_tap(i, j)."""
+    """The heat map for one pair of axis kinds (linear or log): quads coloured by the measure on a
+    log scale (`colour_range`), a colour bar, hover, and a click that calls on_tap(i, j)."""
 
-    def __init__(self, logx, logy, logz, on_tap):
+    def __init__(self, logx, logy, on_tap):
         self.fig = figure("", "x", "y", logx=logx, logy=logy, height=HEIGHT)
         self.source = source()
-        self.mapper = (LogColorMapper if logz else LinearColorMapper)(palette=Viridis256, nan_color="black")
+        self.mapper = LogColorMapper(palette=Viridis256, nan_color="black")
         quads = self.fig.quad(left="left", right="right", bottom="bottom", top="top", source=self.source,
                               fill_color=transform("z", self.mapper), line_color=transform("z", self.mapper),
                               line_width=0.6, nonselection_fill_alpha=1.0, nonselection_line_alpha=1.0)
         # Edges in the cell's own colour: without them anti-aliasing drew white hairlines between cells.
         self.bar = ColorBar(color_mapper=self.mapper, width=12, title_standoff=6,
-                            formatter=CustomJSTickFormatter(code=LOG_TICKS if logz else TICKS))
+                            formatter=CustomJSTickFormatter(code=LOG_TICKS))
         self.fig.add_layout(self.bar, "right")
         self.fig.add_tools(HoverTool(renderers=[quads], tooltips=[("x", "@x{0.[0000]}"), ("y", "@y{0.[0000]}"),
                                                                   ("value", "@z")]), TapTool(renderers=[quads]))
@@ -277,20 +295,19 @@ class MapPlot:
     def set(self, result):
         plan = result.plan
         ax, ay = plan.axes
+        key = plan.measures[0]
         data = cells(result)
         z = data["z"][np.isfinite(data["z"])]
-        flat = isinstance(self.mapper, LinearColorMapper) and len(z) and np.abs(z).max() <= ROUND_OFF
-        if flat:  # round-off in every cell: one colour, not noise drawn as structure
-            self.mapper.update(low=-ROUND_OFF, high=ROUND_OFF)
-        elif len(z):
-            lo, hi = float(z.min()), float(z.max())
-            self.mapper.update(low=lo, high=hi if hi > lo else lo + (abs(lo) or 1.0))
+        scale = colour_range(plan, z)
+        if scale is not None:
+            self.mapper.update(low=scale[0], high=scale[1])
+        below = key == "growth" and scale is not None and z.max() <= scale[0]
         self.source.selected.indices = []
         self.source.data = data
-        self.fig.title.text = f"{plan.measures[0]} of {plan.method} on {plan.scene}" + (
-            f": 0 to round-off in every cell (|value| ≤ {ROUND_OFF:g})" if flat else "")
+        self.fig.title.text = f"{key} of {plan.method} on {plan.scene}" + (
+            f": at most one e-fold over T in every cell (growth ≤ 1/T = {scale[0]:g})" if below else "")
         self.fig.xaxis.axis_label, self.fig.yaxis.axis_label = ax.name, ay.name
-        self.bar.title = plan.measures[0]
+        self.bar.title = f"{key} (≤ 1/T: lowest colour)" if key == "growth" else key
 
 
 MAP_TEXT = ("<p>One measure of the sidebar's method over a grid of two varied quantities (scene parameters, h, T "
@@ -300,8 +317,10 @@ MAP_TEXT = ("<p>One measure of the sidebar's method over a grid of two varied qu
             "inside a parametric-resonance tongue, ln|R(ih)|/h for RK4 beyond its stability limit); "
             "<b>H_ext_max_abs</b> the largest |H~| = |H + p_t| over the run; <b>det_max_dev</b> the largest "
             "|det M<sub>k</sub> − 1| of the one-step maps; <b>error_final</b> the relative error at T against the "
-            "exact flow or a fine RK8 run. Black cells: the run failed (the line below the map says why). The "
-            "same grid runs from the command line, also on a Dask cluster: <code>{command}</code>. "
+            "exact flow or a fine RK8 run. Colours are on a log scale: growth's from 1/T, one e-fold of "
+            "σ<sub>max</sub> over the run (at or below it, the lowest colour), the others' from their smallest "
+            "value. Black cells: the run failed (the line below the map says why). The same grid runs "
+            "from the command line, also on a Dask cluster: <code>{command}</code>. "
             "<b>Click a cell</b> to open that run in the Orbits view.</p>")
 
 
@@ -375,7 +394,7 @@ class StabilityMapView(FeatureView):
             self.box.objects = [note("<p class='doc'>No map yet: choose the axes and press Compute map.</p>")]
             return
         ax, ay = result.plan.axes
-        kind = (ax.log, ay.log, result.plan.measures[0] in LOG_MEASURES)
+        kind = (ax.log, ay.log)
         if kind not in self.plots:
             self.plots[kind] = MapPlot(*kind, m.open_cell)
         plot = self.plots[kind]
