@@ -86,6 +86,17 @@ def test_the_map_s_command_line_runs_the_map_shown(scene):
     assert maps.shared_values(again) == maps.shared_values(plan)
 
 
+def test_the_map_s_command_line_quotes_a_beta_expression_for_the_shell():
+    """An expression of t as the charged particle's beta: the command split as a shell splits it
+    gives the same value ('--set beta=0.05*(1 + tanh(t))' was three words and a syntax error)."""
+    s = Study()
+    s.scene = "charged"
+    s.inputs.beta = "0.05*(1 + tanh(t))"
+    plan = StabilityMap(s, nx=2, ny=2).planned()
+    args = cli.parser().parse_args(shlex.split(maps.map_command(plan))[1:])
+    assert dict(args.set)["beta"] == "0.05*(1 + tanh(t))"
+
+
 def test_a_map_computed_before_a_change_of_the_sidebar_says_so_until_computed_again():
     """The map is computed on Compute map, not on every change of the sidebar: after one, the shown
     map's status names the values it was computed with, and a line says what changed since; its

@@ -4,6 +4,7 @@ when COSYMP_DASK_SCHEDULER names its scheduler), drawn as a heat map (failed run
 on a cell opens that run in Orbits."""
 import html
 import os
+import shlex
 
 import numpy as np
 import panel as pn
@@ -212,8 +213,9 @@ class StabilityMap(Job):
 
 
 def map_command(plan):
-    """The `cosymp sweep` command line of a plan."""
-    fixed = "".join(f" --set {k}={v}" for k, v in plan.values)
+    """The `cosymp sweep` command line of a plan, as a POSIX shell reads it (a beta(t) expression is
+    quoted)."""
+    fixed = "".join(f" --set {shlex.quote(f'{k}={v}')}" for k, v in plan.values)
     vary = "".join(f" --vary {a.name}={a.values[0]:g}:{a.values[-1]:g}:{len(a.values)}" + (":log" if a.log else "")
                    for a in plan.axes)
     run = "".join(f" --{k} {v:g}" for k, v in run_values(plan).items())
