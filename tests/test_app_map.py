@@ -5,6 +5,7 @@ import tracemalloc
 
 import numpy as np
 import pytest
+from bokeh.models import LogColorMapper
 
 from app import jobs, memory
 from app.features import stabilitymap as maps
@@ -105,7 +106,7 @@ def test_a_cell_of_an_h_axis_sets_the_step():
 def test_the_heat_map_taps_to_the_cell_under_the_click_and_marks_failures(tongue):
     _, m = tongue
     opened = []
-    plot = maps.MapPlot(False, False, False, lambda i, j: opened.append((i, j)))
+    plot = maps.MapPlot(False, False, lambda i, j: opened.append((i, j)))
     plot.set(m.result)
     data = plot.source.data
     assert len(data["z"]) == 45 and np.array_equal(np.sort(data["z"]), np.sort(m.result.values["growth"].ravel()))
@@ -122,18 +123,57 @@ def test_the_heat_map_taps_to_the_cell_under_the_click_and_marks_failures(tongue
     assert plot.mapper.nan_color == "black"
 
 
-def test_a_map_that_is_zero_to_round_off_is_drawn_as_zero_and_says_so(tongue):
+def test_growth_is_coloured_in_e_folds_from_one_over_T_and_round_off_is_one_colour(tongue):
     """Midpoint on the decaying oscillator: every one-step map is a rotation, so the growth is
-    round-off (|growth| ~ 1e-16) in every cell; it is one colour, not noise, and the title says why."""
+    round-off (|growth| ~ 1e-16) in every cell; below 1/T (one e-fold over the run) it is the
+    lowest colour, not noise drawn as structure, and the title says why. The tongue map spans 1/T to
+    its largest growth."""
     flat = sweep.run(sweep.plan("decaying", "midpoint", ["h=0.05:3:4:log", "lam=0.1:5:3"], ["growth"], T=10))
     assert np.abs(flat.values["growth"]).max() < 1e-14
-    plot = maps.MapPlot(True, False, False, lambda i, j: None)
+    plot = maps.MapPlot(True, False, lambda i, j: None)
     plot.set(flat)
-    assert (plot.mapper.low, plot.mapper.high) == (-maps.ROUND_OFF, maps.ROUND_OFF)
-    assert plot.fig.title.text.endswith("0 to round-off in every cell (|value| ≤ 1e-12)")
+    assert isinstance(plot.mapper, LogColorMapper) and plot.mapper.low == 0.1
+    assert all(colour_index(plot.mapper, z) == 0 for z in plot.source.data["z"])
+    assert plot.fig.title.text.endswith("at most one e-fold over T in every cell (growth ≤ 1/T = 0.1)")
     _, m = tongue
     plot.set(m.result)
-    assert plot.mapper.high == m.result.values["growth"].max() and "round-off" not in plot.fig.title.text
+    assert (plot.mapper.low, plot.mapper.high) == (1 / 50, m.result.values["growth"].max())
+    assert "e-fold" not in plot.fig.title.text
+    longest = sweep.run(sweep.plan("modulated", "midpoint", ["T=10:40:2", "eps=0:0.8:2"], ["growth"], values={"alpha": 2.0}))
+    plot.set(longest)
+    assert plot.mapper.low == 1 / 40, "a T axis: one e-fold over the longest run"
+
+
+def colour_index(mapper, z, n=256):
+    """The palette entry BokehJS gives z (its LogColorMapper: below low the first, above high the last)."""
+    low, high = mapper.low, mapper.high
+    if z <= low:
+        return 0
+    return min(n - 1, int(n * math.log(z / low) / math.log(high / low)))
+
+
+def test_kapitza_s_map_shows_where_the_inverted_pendulum_falls_and_where_it_stays_up():
+    """Kapitza's first map (growth of its first view's Gauss method over nu x a, from q0 = 3): the
+    cells well below a nu = sqrt(2) w0 (the pendulum falls) are coloured a median 50 palette entries
+    (of 256) above those well beyond it (it stays up) below the upper instability at a ~ 0.45; on
+    the linear scale from the smallest to the largest growth (11 there) they were 3 entries apart.
+    (Where the drive is weak, a = 0.03 at nu 10-20, the fallen pendulum swings regularly: its
+    growth, 0.03-0.1, is a stable cell's.)"""
+    s = Study()
+    s.scene = "kapitza"
+    m = StabilityMap(s, nx=16, ny=16)
+    m.start()
+    assert (m.x, m.y, m.measure) == ("nu", "a", "growth")
+    plot = maps.MapPlot(False, False, lambda i, j: None)
+    plot.set(m.result)
+    d = plot.source.data
+    colour = np.array([colour_index(plot.mapper, z) for z in d["z"]])
+    nu, a = d["x"], d["y"]
+    falls = (a > 0) & (a * nu < 0.8 * math.sqrt(2))
+    up = (a * nu > 1.25 * math.sqrt(2)) & (a < 0.4)
+    assert falls.sum() >= 10 and up.sum() >= 100
+    assert np.median(colour[falls]) - np.median(colour[up]) >= 30, (np.median(colour[falls]), np.median(colour[up]))
+    assert np.mean(colour[falls] > np.median(colour[up])) >= 0.8
 
 
 @pytest.mark.parametrize("change, needle", [
@@ -180,14 +220,13 @@ def test_the_colour_bar_uses_the_apps_compact_ticks_and_cells_have_no_gaps():
     read 1e-12; the cells' edges are drawn in their own colour (white hairlines between them)."""
     from bokeh.models import ColorBar
 
-    from app.plotting import LOG_TICKS, TICKS
+    from app.plotting import LOG_TICKS
 
-    for logz, code in ((False, TICKS), (True, LOG_TICKS)):
-        plot = maps.MapPlot(False, False, logz, lambda i, j: None)
-        bar = next(r for r in plot.fig.right if isinstance(r, ColorBar))
-        assert bar.formatter.code == code
-        glyph = plot.fig.renderers[0].glyph
-        assert glyph.line_color == glyph.fill_color and glyph.line_color.transform is plot.mapper
+    plot = maps.MapPlot(False, False, lambda i, j: None)
+    bar = next(r for r in plot.fig.right if isinstance(r, ColorBar))
+    assert bar.formatter.code == LOG_TICKS
+    glyph = plot.fig.renderers[0].glyph
+    assert glyph.line_color == glyph.fill_color and glyph.line_color.transform is plot.mapper
 
 
 @pytest.mark.slow

@@ -16,6 +16,7 @@ from cosymp.study import gauge_study
 
 from ..jobs import Note
 from ..plotting import equation, figure, grid, note, pane, path, peaks, series, source, swatch
+from ..presets import case_state
 from ..study import comparison_bytes, theta_for
 from .base import Feature, FeatureView, Follower
 
@@ -29,6 +30,22 @@ QUANTITIES = {"orbit": ("orbit (x, y)", "x", "y"), "p": ("canonical p_x (gauge-d
 def gauged_scene():
     """The scene this tab studies: the first with gauges (Scene.gauges)."""
     return next(s for s in SCENES.values() if s.has_gauges)
+
+
+def gauge_figure():
+    """The gauged scene's case this tab shows: the one it declares with view 'gauges' (the paper's
+    gauge figure, also a link of the sidebar's Paper figures)."""
+    return next(c for c in gauged_scene().cases if c.view == "gauges")
+
+
+def open_gauge_figure(study):
+    """Put the study in the state the gauge figure's link opens, in this page: the scene first (a
+    change of scene opens the scene's first view, Study._on_change), then the figure's methods, h, T,
+    values and the Gauges tab over that first view. (In one update, a value the study already held
+    would be no change, and the first view's would stand.)"""
+    state = case_state(gauged_scene(), gauge_figure())
+    study.scene = state.pop("scene")
+    study.param.update(**state)
 
 
 class GaugeStudy(Follower):
@@ -140,9 +157,10 @@ class GaugeView(FeatureView):
         self.method = note("")
         self.follow(g, "results", "method")
         self.study.param.watch(lambda e: self.changed(), "scene")
-        button = pn.widgets.Button(name="Open the charged particle", button_type="primary")
-        button.on_click(lambda event: self.study.param.update(scene=gauged_scene().name))
-        self.away = pn.Column(note("<p>The gauge study is about the charged particle in a time-dependent field.</p>"),
+        button = pn.widgets.Button(name="Open the paper's gauge figure", button_type="primary")
+        button.on_click(lambda event: open_gauge_figure(self.study))
+        self.away = pn.Column(note("<p>The gauge study is about the charged particle in a time-dependent field: "
+                                   f"the paper's figure is <b>{html.escape(gauge_figure().name)}</b>.</p>"),
                               button)
         self.floor = note("")
         self.body = pn.Column(self.method, *rows, note(f"<div class='colorkey'>{key}</div>"),

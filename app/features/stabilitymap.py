@@ -4,6 +4,7 @@ when COSYMP_DASK_SCHEDULER names its scheduler), drawn as a heat map (failed run
 on a cell opens that run in Orbits."""
 import html
 import os
+import shlex
 
 import numpy as np
 import panel as pn
@@ -12,7 +13,6 @@ from bokeh.models import (
     ColorBar,
     CustomJSTickFormatter,
     HoverTool,
-    LinearColorMapper,
     LogColorMapper,
     TapTool,
 )
@@ -22,9 +22,10 @@ from bokeh.transform import transform
 from cosymp import sweep
 from cosymp.errors import InputError
 from cosymp.methods import METHODS
+from cosymp.scenes import SCENES
 
 from ..jobs import Job
-from ..plotting import FLOOR, LOG_TICKS, TICKS, figure, note, pane, source
+from ..plotting import FLOOR, LOG_TICKS, figure, note, pane, source
 from ..study import soft_range, theta_for
 from .base import Feature, FeatureView
 from .workprecision import run_controls
@@ -66,6 +67,26 @@ def map_bytes(points):
 
 def significant(x):
     return float(f"{x:.{SIGNIFICANT}g}")
+
+
+def run_values(plan):
+    """{name: value} of h, T and θ (where the method takes it) as every cell of a plan runs them,
+    less the varied ones (a varied name's plan value is the scene's default, which no cell uses)."""
+    varied = {a.name for a in plan.axes}
+    run = {"h": plan.h, "T": plan.T, "theta": plan.theta}
+    return {k: v for k, v in run.items() if v is not None and k not in varied}
+
+
+def shared_values(plan):
+    """{name: value} of everything every cell of a plan runs with but its varied names: h, T, θ
+    (`run_values`) and each of the scene's parameters (its default unless the plan sets it)."""
+    varied = {a.name for a in plan.axes}
+    scene = SCENES[plan.scene].values(dict(plan.values))
+    return {**run_values(plan), **{k: v for k, v in scene.items() if k not in varied}}
+
+
+def value_text(v):
+    return f"{v:g}" if isinstance(v, float) else str(v)
 
 
 class StabilityMap(Job):
@@ -150,10 +171,9 @@ class StabilityMap(Job):
 
     def _describe(self, plan):
         (ax, ay) = plan.axes
-        fixed = ", ".join(f"{k} = {v}" for k, v in plan.values)
-        return (f"{plan.measures[0]} of {plan.method} on {plan.scene}" + (f" ({fixed})" if fixed else "")
-                + f": {ax.name} {ax.values[0]:g}…{ax.values[-1]:g} × {ay.name} {ay.values[0]:g}…{ay.values[-1]:g}, "
-                f"{plan.size} cells, h = {plan.h:g}, T = {plan.T:g} where not varied")
+        shared = ", ".join(f"{k} = {value_text(v)}" for k, v in shared_values(plan).items())
+        return (f"{plan.measures[0]} of {plan.method} on {plan.scene}: {ax.name} {ax.values[0]:g}…{ax.values[-1]:g} "
+                f"× {ay.name} {ay.values[0]:g}…{ay.values[-1]:g}, {plan.size} cells, each with {shared}")
 
     def _started(self, plan):
         self.status = f"running: {self._describe(plan)}"
@@ -193,13 +213,14 @@ class StabilityMap(Job):
 
 
 def map_command(plan):
-    """The `cosymp sweep` command line of a plan."""
-    fixed = "".join(f" --set {k}={v}" for k, v in plan.values)
+    """The `cosymp sweep` command line of a plan, as a POSIX shell reads it (a beta(t) expression is
+    quoted)."""
+    fixed = "".join(f" --set {shlex.quote(f'{k}={v}')}" for k, v in plan.values)
     vary = "".join(f" --vary {a.name}={a.values[0]:g}:{a.values[-1]:g}:{len(a.values)}" + (":log" if a.log else "")
                    for a in plan.axes)
-    theta = f" --theta {plan.theta:g}" if plan.theta is not None else ""
-    return (f"cosymp sweep {plan.scene} --method {plan.method}{vary} --measure {' '.join(plan.measures)} "
-            f"--h {plan.h:g} --T {plan.T:g}{theta}{fixed} -o map.csv")
+    run = "".join(f" --{k} {v:g}" for k, v in run_values(plan).items())
+    return (f"cosymp sweep {plan.scene} --method {plan.method}{vary} --measure {' '.join(plan.measures)}"
+            f"{run}{fixed} -o map.csv")
 
 
 def edges(values, log):
@@ -230,23 +251,42 @@ def cells(result):
             "x": np.asarray(ax.values)[i], "y": np.asarray(ay.values)[j]}
 
 
-ROUND_OFF = 1e-12  # a linear map whose every cell is within this of 0 is drawn as 0
+def colour_range(plan, z):
+    """(low, high) of a map's log colour scale for its finite values z, or None if it has none.
+
+    growth from 1/T (of the grid's longest run): ln σ_max = 1, one e-fold of the product of the
+    one-step maps over the run. A bounded map's growth is the logarithm of its oscillation's stretch
+    over T (a few e-folds at most; round-off where every map is a rotation), a contraction's is
+    negative, an instability's is many e-folds: at or below one, the lowest colour, and the colours
+    above count e-folds on a log scale. On a linear scale from the smallest to the largest value,
+    Kapitza's map was one colour but for its top rows (the upper instability of the inverted
+    position, growth up to 12 against 0.15-0.7 where the pendulum falls and 0.01-0.2 where it stays
+    up), and noise of 1e-16 was drawn as structure where every cell was round-off. The other
+    measures, deviations over decades: their smallest to largest value."""
+    if not len(z):
+        return None
+    if plan.measures[0] == "growth":
+        low = 1.0 / max(next((a.values for a in plan.axes if a.name == "T"), (plan.T,)))
+    else:
+        low = float(z.min())
+    high = float(z.max())
+    return low, high if high > low else 10.0 * low
 
 
 class MapPlot:
-    """The heat map for one pair of axis kinds (linear or log): quads coloured by the measure, a
-    colour bar, hover, and a click that calls on_tap(i, j)."""
+    """The heat map for one pair of axis kinds (linear or log): quads coloured by the measure on a
+    log scale (`colour_range`), a colour bar, hover, and a click that calls on_tap(i, j)."""
 
-    def __init__(self, logx, logy, logz, on_tap):
+    def __init__(self, logx, logy, on_tap):
         self.fig = figure("", "x", "y", logx=logx, logy=logy, height=HEIGHT)
         self.source = source()
-        self.mapper = (LogColorMapper if logz else LinearColorMapper)(palette=Viridis256, nan_color="black")
+        self.mapper = LogColorMapper(palette=Viridis256, nan_color="black")
         quads = self.fig.quad(left="left", right="right", bottom="bottom", top="top", source=self.source,
                               fill_color=transform("z", self.mapper), line_color=transform("z", self.mapper),
                               line_width=0.6, nonselection_fill_alpha=1.0, nonselection_line_alpha=1.0)
         # Edges in the cell's own colour: without them anti-aliasing drew white hairlines between cells.
         self.bar = ColorBar(color_mapper=self.mapper, width=12, title_standoff=6,
-                            formatter=CustomJSTickFormatter(code=LOG_TICKS if logz else TICKS))
+                            formatter=CustomJSTickFormatter(code=LOG_TICKS))
         self.fig.add_layout(self.bar, "right")
         self.fig.add_tools(HoverTool(renderers=[quads], tooltips=[("x", "@x{0.[0000]}"), ("y", "@y{0.[0000]}"),
                                                                   ("value", "@z")]), TapTool(renderers=[quads]))
@@ -257,20 +297,19 @@ class MapPlot:
     def set(self, result):
         plan = result.plan
         ax, ay = plan.axes
+        key = plan.measures[0]
         data = cells(result)
         z = data["z"][np.isfinite(data["z"])]
-        flat = isinstance(self.mapper, LinearColorMapper) and len(z) and np.abs(z).max() <= ROUND_OFF
-        if flat:  # round-off in every cell: one colour, not noise drawn as structure
-            self.mapper.update(low=-ROUND_OFF, high=ROUND_OFF)
-        elif len(z):
-            lo, hi = float(z.min()), float(z.max())
-            self.mapper.update(low=lo, high=hi if hi > lo else lo + (abs(lo) or 1.0))
+        scale = colour_range(plan, z)
+        if scale is not None:
+            self.mapper.update(low=scale[0], high=scale[1])
+        below = key == "growth" and scale is not None and z.max() <= scale[0]
         self.source.selected.indices = []
         self.source.data = data
-        self.fig.title.text = f"{plan.measures[0]} of {plan.method} on {plan.scene}" + (
-            f": 0 to round-off in every cell (|value| ≤ {ROUND_OFF:g})" if flat else "")
+        self.fig.title.text = f"{key} of {plan.method} on {plan.scene}" + (
+            f": at most one e-fold over T in every cell (growth ≤ 1/T = {scale[0]:g})" if below else "")
         self.fig.xaxis.axis_label, self.fig.yaxis.axis_label = ax.name, ay.name
-        self.bar.title = plan.measures[0]
+        self.bar.title = f"{key} (≤ 1/T: lowest colour)" if key == "growth" else key
 
 
 MAP_TEXT = ("<p>One measure of the sidebar's method over a grid of two varied quantities (scene parameters, h, T "
@@ -280,9 +319,26 @@ MAP_TEXT = ("<p>One measure of the sidebar's method over a grid of two varied qu
             "inside a parametric-resonance tongue, ln|R(ih)|/h for RK4 beyond its stability limit); "
             "<b>H_ext_max_abs</b> the largest |H~| = |H + p_t| over the run; <b>det_max_dev</b> the largest "
             "|det M<sub>k</sub> − 1| of the one-step maps; <b>error_final</b> the relative error at T against the "
-            "exact flow or a fine RK8 run. Black cells: the run failed (the line below the map says why). The "
-            "same grid runs from the command line, also on a Dask cluster: <code>{command}</code>. "
+            "exact flow or a fine RK8 run. Colours are on a log scale: growth's from 1/T, one e-fold of "
+            "σ<sub>max</sub> over the run (at or below it, the lowest colour), the others' from their smallest "
+            "value. Black cells: the run failed (the line below the map says why). The same grid runs "
+            "from the command line, also on a Dask cluster: <code>{command}</code>. "
             "<b>Click a cell</b> to open that run in the Orbits view.</p>")
+
+
+def since_text(shown, asked):
+    """What the shown map (its plan) was not computed with that the sidebar and the map's controls
+    now ask for (`asked`, None if they ask for no map): '' when they ask for the shown map. The map
+    is computed on Compute map (or a first visit), not on every change of the sidebar."""
+    if shown is None or asked is None:
+        return ""
+    old, new = shared_values(shown), shared_values(asked)
+    if (shown.axes, shown.measures, old) == (asked.axes, asked.measures, new):
+        return ""
+    changed = ", ".join(f"{k} = {value_text(v)}" for k, v in new.items() if old.get(k) != v)
+    return (f"<p class='doc since'><b>Computed before the latest changes</b> "
+            f"({'now ' + html.escape(changed) if changed else 'of its axes or measure'}): press Compute map "
+            "to compute it with them.</p>")
 
 
 def map_failures(result):
@@ -306,7 +362,11 @@ class StabilityMapView(FeatureView):
         self.box = pn.Column(sizing_mode="stretch_width")
         self.text = note("")
         self.failures = note("")
-        self.follow(m, "result")
+        self.since = note("")
+        self._drawn = None
+        self.follow(m, "result", "running", "measure", *(f"{a}{k}" for a in "xy" for k in ("", "_start", "_stop", "_log")),
+                    "nx", "ny")
+        self.follow(self.study, "h", "T", "theta", "values")
 
         def axis(prefix):
             p = m.param
@@ -317,7 +377,7 @@ class StabilityMapView(FeatureView):
                           pn.widgets.Checkbox.from_param(p[f"{prefix}_log"], margin=(30, 10, 10, 10)))
 
         return pn.Column(self.text, pn.widgets.Select.from_param(m.param.measure, width=200), axis("x"), axis("y"),
-                         row, status, self.box, self.failures, sizing_mode="stretch_width")
+                         row, status, self.since, self.box, self.failures, sizing_mode="stretch_width")
 
     def wanted(self):
         if self.state.result is None and not self.state.busy:
@@ -326,19 +386,23 @@ class StabilityMapView(FeatureView):
     def update(self):
         m = self.state
         result = m.result
-        plan = result.plan if result else m.planned()
+        asked = m.planned()
+        plan = result.plan if result else asked
         self.text.object = MAP_TEXT.format(command=html.escape(map_command(plan)) if plan else
                                            "cosymp sweep SCENE --vary NAME=START:STOP:NUM ...")
         self.failures.object = map_failures(result)
+        self.since.object = "" if m.running else since_text(result.plan if result else None, asked)
         if result is None:
             self.box.objects = [note("<p class='doc'>No map yet: choose the axes and press Compute map.</p>")]
             return
         ax, ay = result.plan.axes
-        kind = (ax.log, ay.log, result.plan.measures[0] in LOG_MEASURES)
+        kind = (ax.log, ay.log)
         if kind not in self.plots:
             self.plots[kind] = MapPlot(*kind, m.open_cell)
         plot = self.plots[kind]
-        plot.set(result)
+        if self._drawn is None or self._drawn[0] is not plot or self._drawn[1] is not result:
+            plot.set(result)  # not again when only the inputs changed: the text is redrawn, not the cells
+            self._drawn = (plot, result)
         if self.box.objects != [plot.pane]:
             self.box.objects = [plot.pane]
 
