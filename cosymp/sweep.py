@@ -525,7 +525,9 @@ def summary(result):
     grid = " x ".join(f"{a.name} {len(a.values)}" for a in p.axes)
     failed, first = result.failures()
     tasks = len(result.task_seconds)
-    lines = [f"{p.scene} with {p.method}: {p.size} points ({grid}), h = {p.h:g}, T = {p.T:g} where not varied",
+    varied = {a.name for a in p.axes}
+    fixed = ", ".join(f"{k} = {v:g}" for k, v in (("h", p.h), ("T", p.T)) if k not in varied)
+    lines = [f"{p.scene} with {p.method}: {p.size} points ({grid})" + (f", {fixed}" if fixed else ""),
              f"  {result.wall_s:.2f} s on {result.where}; {tasks} tasks after the first two points"
              + (f", {sum(result.task_seconds) / tasks:.3g} s of compute each, overhead "
                 f"{1e3 * result.overhead_per_task_s:.3g} ms per task" if tasks else "")]

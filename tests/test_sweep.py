@@ -530,7 +530,14 @@ def test_cli_sweep_writes_rows_and_summary(tmp_path):
     expected = sweep.run(sweep.plan("modulated", "midpoint", ["eps=0:0.4:3", "alpha=1.8:2.2:3"], ["growth"],
                                     T=20.0))
     assert np.array_equal(g, expected.values["growth"].ravel())
-    assert "9 points (eps 3 x alpha 3)" in out and "growth: min" in out and f"written to {path}" in out
+    assert "9 points (eps 3 x alpha 3), h = 0.1, T = 20" in out and "growth: min" in out and f"written to {path}" in out
+
+
+def test_the_sweep_summary_gives_only_the_step_and_horizon_it_did_not_vary():
+    """With h on an axis the summary gave the plan's default h "where not varied", a value no point used."""
+    result = sweep.run(sweep.plan("damped", "midpoint", ["h=0.1:0.2:2"], ["growth"], T=5.0))
+    head = sweep.summary(result).splitlines()[0]
+    assert head.endswith("2 points (h 2), T = 5") and "h =" not in head
 
 
 BAD_CLI = [
