@@ -3,14 +3,12 @@
 Each adjustment names what it saves; tests/test_app_main.py fails when a Panel or Bokeh release
 changes what one relies on.
 """
-import asyncio
 import contextlib
 import functools
 from typing import ClassVar
 
 import panel as pn
 from bokeh.resources import Resources
-from bokeh.server.contexts import ApplicationContext
 from panel.io import document
 from panel.io.document import unlocked
 from panel.io.resources import LOCAL_DIST
@@ -125,29 +123,6 @@ def _seen_if_closed(future):
         future._log_traceback = False
 
 
-SESSION_AFTER_S = 0.1  # the browser asks for the files 10-20 ms after the HTML; serving them takes 20-50 ms
-
-
-def files_first(create_session):
-    """Bokeh's creation of a page's session, started SESSION_AFTER_S after the page's HTML was sent
-    instead of at once. Panel (warm `reuse_sessions`, app/warmup.py) writes a page's HTML from the
-    first session's document and then builds the page's own session on the event loop: about 0.4 s
-    during which the server answered none of the 25 scripts and stylesheets the HTML asks for, so
-    the browser could neither load nor run them (its first plot 1.5 s after navigation). Given the
-    moment to serve them, it runs them while the session is built. A page whose websocket connects
-    meanwhile creates the session itself (Bokeh's own path; this one then finds it made), and the
-    server's first page, from which Panel writes every later page's HTML, is not delayed."""
-
-    @functools.wraps(create_session)
-    async def create(self, session_id, request=None, token=None):
-        if self._sessions and request is not None and not request.path.endswith("/ws"):
-            await asyncio.sleep(SESSION_AFTER_S)
-        return await create_session(self, session_id, request, token)
-
-    create.cosymp = True
-    return create
-
-
 def adjust_panel():
     """Panel's handling of the page's events, for this server process (once; each page runs main.py):
     a change is handled at once, not 50 ms later (Panel waits that long for more changes of the same
@@ -163,8 +138,6 @@ def adjust_panel():
         document._dispatch_msgs = no_stranded_messages(document._dispatch_msgs)
     if not getattr(WebSocketHandler.write_message, "cosymp", False):
         WebSocketHandler.write_message = closed_writes_seen(WebSocketHandler.write_message)
-    if not getattr(ApplicationContext.create_session_if_needed, "cosymp", False):
-        ApplicationContext.create_session_if_needed = files_first(ApplicationContext.create_session_if_needed)
 
 
 def serve_locally():

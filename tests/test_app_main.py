@@ -1,5 +1,4 @@
 """The served page (app/main.py) composed in-process, without a server or a browser."""
-import inspect
 import pathlib
 import types
 
@@ -178,35 +177,6 @@ def test_a_data_update_does_not_walk_the_model_graph_and_a_new_model_is_attached
     with plotting.deferred_graph(doc):
         column.append(pn.pane.Bokeh(plotting.figure("new")))  # Panel's freeze_doc ends inside
     assert walks == [1] and doc.models._freeze_count == 0, "one walk, at the end, for a layout's new children"
-
-
-def test_a_pages_session_is_built_after_its_files_are_served():
-    """page.files_first: Panel's warm session for a page's HTML is built SESSION_AFTER_S later; not the
-    server's first (Panel writes every page's HTML from it), nor one a websocket asks for."""
-    import asyncio
-
-    from bokeh.server.contexts import ApplicationContext
-
-    page.adjust_panel()
-    assert ApplicationContext.create_session_if_needed.cosymp
-    assert list(inspect.signature(ApplicationContext.create_session_if_needed.__wrapped__).parameters) == [
-        "self", "session_id", "request", "token"]
-    created = []
-
-    async def create(self, session_id, request=None, token=None):
-        created.append((session_id, asyncio.get_running_loop().time()))
-
-    wrapped = page.files_first(create)
-
-    async def times(sessions, path):
-        context = types.SimpleNamespace(_sessions=sessions)
-        start = asyncio.get_running_loop().time()
-        await wrapped(context, "id", types.SimpleNamespace(path=path), "token")
-        return created[-1][1] - start
-
-    assert asyncio.run(times({"first": 1}, "/app")) >= page.SESSION_AFTER_S > 0
-    assert asyncio.run(times({}, "/app")) < page.SESSION_AFTER_S, "the server's first page"
-    assert asyncio.run(times({"first": 1}, "/app/ws")) < page.SESSION_AFTER_S, "asked for by the websocket"
 
 
 def test_the_layouts_shim_still_matches_bokehjs():
