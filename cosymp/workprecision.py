@@ -34,7 +34,7 @@ import numpy as np
 from .diagnostics import relative_error
 from .drive import CHUNK, Drive, map_every
 from .errors import InputError, RunError
-from .integrate import MAX_STEPS, Setup, check_step, get_scene, simulate
+from .integrate import MAX_STEPS, Setup, check_step, exact_flow, get_scene, simulate
 from .kernels.loops import energies
 from .kernels.registry import family
 from .methods import METHODS
@@ -122,7 +122,7 @@ def reference(setup, T):
     scene = setup.scene
     if scene.has_flow:
         try:
-            z, _ = _flow(Setup.make(scene, "exact", setup.values), None, None, 0.0, T, 0.01 * scene.time_scale)
+            z, _ = exact_flow(Setup.make(scene, "exact", setup.values), None, None, 0.0, T, 0.01 * scene.time_scale)
         except RunError as e:
             raise RunError(_beyond("the exact flow", T, e.time, T) + ", or a shorter T", T, 0) from None
         return z[0], "exact flow", 0.0
@@ -330,7 +330,7 @@ def _drift_reference(setup, h, counts, report, total):
         refs, z, pt, t = [], None, None, 0.0
         for N in counts:
             try:
-                z, pt = _flow(exact, z, pt, t, N * h, h)
+                z, pt = exact_flow(exact, z, pt, t, N * h, h)
             except RunError as e:
                 return refs, [0.0] * len(refs), "exact flow", _beyond("the exact flow", N * h, e.time, counts[-1] * h)
             refs.append(z[0])
@@ -342,24 +342,6 @@ def _drift_reference(setup, h, counts, report, total):
     coarse, _ = _checkpoints(rk8, h, counts[:len(fine)], tick)
     why = _beyond("the rk8 reference", counts[len(fine)] * h, failed.time, counts[-1] * h) if failed else ""
     return fine, [relative_error(c, f)[0] for f, c in zip(fine, coarse)], "rk8 at h/2", why
-
-
-def _flow(exact, z, pt, t0, t1, shortest):
-    """(z, p_t) of the exact flow carried from t0 (z, pt; None: the scene's initial state) to t1
-    in one step, which is exact at any length; a step that fails is split in halves down to
-    `shortest`. A long step fails before the state does: the damped oscillator's coefficients
-    e^(±γ s) over a step of length s pass floating point at γ s = 709, while its state stays finite
-    to γ t = 1420 (a single step from 0 ended its reference at T = 5000 for γ = 0.2, which
-    reaches 7098). RunError where a step of `shortest` fails: there the state itself overflows."""
-    try:
-        run = simulate(exact, t1 - t0, t1 - t0, z0=z, pt0=pt, t0=t0)
-    except RunError:
-        if t1 - t0 <= shortest:
-            raise
-        middle = t0 + 0.5 * (t1 - t0)
-        z, pt = _flow(exact, z, pt, t0, middle, shortest)
-        return _flow(exact, z, pt, middle, t1, shortest)
-    return run.z[-1], run.pt[-1]
 
 
 def _beyond(what, T, t, top):

@@ -124,3 +124,17 @@ def test_run_gives_the_same_relative_error_as_the_comparison():
     assert code == 0, err
     c = compare(Setup.make("damped", "midpoint"), 0.1, 50.0)
     assert json.loads(out)["error_final"] == pytest.approx(float(c.error[-1]), rel=1e-9) == pytest.approx(0.125, abs=1e-3)
+
+
+def test_run_error_where_one_exact_step_over_T_overflows():
+    """damped at gamma T = 1000: the reference was one exact step over T, which overflows (the run
+    exited 3 with 'overflow ... reduce h'); carried in pieces it is the comparison's exact flow of
+    10^4 steps, to their rounding of the phase."""
+    from cosymp.integrate import Setup
+    from cosymp.study import compare
+
+    code, out, err = run_cli("run", "damped", "--method", "gauss4", "--set", "gamma=1", "--h", "0.1", "--T", "1000",
+                             "--json")
+    assert code == 0, err
+    c = compare(Setup.make("damped", "gauss4", {"gamma": 1.0}), 0.1, 1000.0)
+    assert json.loads(out)["error_final"] == pytest.approx(float(c.error[-1]), rel=1e-5) == pytest.approx(0.0115, rel=0.01)

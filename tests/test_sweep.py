@@ -19,6 +19,7 @@ import pytest
 
 from cosymp import sweep
 from cosymp.cli import main
+from cosymp.diagnostics import relative_error
 from cosymp.errors import InputError
 from cosymp.integrate import MAX_STEPS, Setup, simulate
 from cosymp.reference import scipy_reference
@@ -296,6 +297,19 @@ def test_exact_flow_keeps_H_ext_and_has_no_error(scene):
     assert np.all(r.status == "ok")
     assert np.max(r.values["H_ext_max_abs"]) < 1e-13
     assert np.max(r.values["error_final"]) < 1e-12
+
+
+def test_error_final_where_one_exact_step_over_T_overflows():
+    """gamma T = 1000: one exact step over T leaves floating point (every point's error_final was NaN
+    with an overflow status) while the state does not (q ~ 1e215, p ~ 1e-218). Each point's error is
+    now its distance from 10^4 exact steps of h, to their rounding of the phase (3e-11)."""
+    p = sweep.plan("damped", "gauss4", ["gamma=0.9:1:2"], ["error_final"], h=0.1, T=1000.0)
+    r = sweep.run(p)
+    assert list(r.status) == ["ok", "ok"]
+    for gamma, error in zip(hs(p, "gamma"), r.values["error_final"]):
+        run, exact = (simulate(Setup.make("damped", m, {"gamma": gamma}), 0.1, 1000.0, stride=10_000).z[-1, 0]
+                      for m in ("gauss4", "exact"))
+        assert 1e-6 < error < 0.1 and error == pytest.approx(relative_error(run, exact)[0], rel=1e-5)
 
 
 @pytest.mark.parametrize("scene,method,order", [
