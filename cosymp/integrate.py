@@ -226,7 +226,7 @@ def simulate(setup, h, T, z0=None, stride=None, increments=False, t0=0.0, pt0=No
     traj = Trajectory(setup, h, stride, Trec[:kept], Zrec[:kept], PTrec[:kept], H[:kept], done, wall,
                       dZrec[:kept] if increments else None)
     t_fail = t0 + done * h
-    traj.failure = failure_message(status, round(t0 / h) + done, t_fail, h, _exact_overflows(setup, t_fail))
+    traj.failure = failure_message(status, round(t0 / h) + done, t_fail, h, _exact_overflows(setup, t_fail, h))
     raise RunError(traj.failure, t_fail, done, traj)
 
 
@@ -249,12 +249,13 @@ def exact_flow(exact, z, pt, t0, t1, shortest):
     return run.z[-1], run.pt[-1]
 
 
-def _exact_overflows(setup, t):
-    """Whether the scene's exact flow itself leaves floating-point range by t (then no step size helps)."""
+def _exact_overflows(setup, t, h):
+    """Whether the scene's exact flow itself leaves floating-point range by t (then no step size
+    helps), carried in steps of at most t (exact_flow) down to h where one fails."""
     if not setup.scene.has_flow or setup.method.requires == "flow":
         return False
     try:
-        z = simulate(Setup.make(setup.scene, "exact", setup.values), t, t).z[-1, 0]
+        z, _ = exact_flow(Setup.make(setup.scene, "exact", setup.values), None, None, 0.0, t, h)
     except RunError:
         return True
     return not np.all(np.abs(z) < 1e300)

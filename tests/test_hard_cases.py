@@ -280,6 +280,19 @@ def test_damped_reference_beyond_floating_point_says_where():
     assert 1415 < info.value.time < 1425
 
 
+def test_a_method_overflowing_before_the_exact_state_is_told_to_reduce_h():
+    """Explicit Euler at h = 0.5 and RK4 at h = 2.5 leave floating point at gamma = 1 near t = 982 and
+    755, where the exact state is finite (to t = 1420) but one exact step from 0 is not: the
+    message says to reduce h, not that no step size helps; midpoint at h = 0.1 passes t = 1300."""
+    for method, h in (("euler", 0.5), ("rk4", 2.5)):
+        with pytest.raises(RunError, match="reduce h if the solution should stay bounded") as info:
+            simulate(setup("damped", method, gamma=1.0), h, 1300.0, stride=1000)
+        assert 709 < info.value.time < 1300
+    simulate(setup("damped", "midpoint", gamma=1.0), 0.1, 1300.0, stride=1000)
+    with pytest.raises(RunError, match="as the exact solution does by then"):
+        simulate(setup("damped", "midpoint", gamma=1.0), 0.1, 1500.0, stride=1000)
+
+
 def test_damped_scaling_matches_the_unscaled_step_to_round_off():
     """Where nothing overflows (gamma t <= 20) the scaled steps agree with a direct check: the
     midpoint equations hold for the unscaled state to round-off."""
