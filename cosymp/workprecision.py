@@ -116,6 +116,16 @@ def peer_solve(setup, solver, T, rtol):
     return scipy_reference(setup, T, rtol=rtol, atol=rtol, method=solver)
 
 
+def reference_steps(scene, T):
+    """Steps of the rk8 run that checks the reference to T (scenes without an exact flow), or
+    InputError past the step cap."""
+    steps = max(1, math.ceil(T / (0.01 * scene.time_scale)))
+    if steps > MAX_STEPS:
+        raise InputError(f"T = {T:g} is too long for a reference solution ({steps:.3g} steps of rk8 beyond the "
+                         f"cap of {MAX_STEPS:.0e}): shorten T")
+    return steps
+
+
 def reference(setup, T):
     """(z_ref at T, label, uncertainty): the exact flow, else scipy DOP853 at 3e-14 (tighter
     than any peer run) checked against cosymp's rk8 at a step of 1% of the scene's time scale."""
@@ -126,10 +136,7 @@ def reference(setup, T):
         except RunError as e:
             raise RunError(_beyond("the exact flow", T, e.time, T) + ", or a shorter T", T, 0) from None
         return z[0], "exact flow", 0.0
-    steps = max(1, math.ceil(T / (0.01 * scene.time_scale)))
-    if steps > MAX_STEPS:
-        raise InputError(f"T = {T:g} is too long for a reference solution ({steps:.3g} steps of rk8 beyond the "
-                         f"cap of {MAX_STEPS:.0e}): shorten T")
+    steps = reference_steps(scene, T)
     sol = peer_solve(setup, "DOP853", T, REFERENCE_RTOL)
     if sol.status != 0:
         raise RunError(f"reference DOP853 failed: {sol.message}", T, 0)
@@ -222,9 +229,20 @@ def measure(scene, methods=None, values=None, T=None, hs=None, theta=None, peers
     stops decreasing for two refinements (round-off), or max_steps is reached.
     progress(done, total, label) is called before each run; total counts methods and peers.
     partial(rows), if given, is called with a copy of the rows so far after each run.
+    The input is checked before the first progress report.
     """
     scene, setups = _setups(scene, methods, values, theta)
     T = scene.T if T is None else check_horizon(T)
+    if hs is not None:
+        counts = sorted({check_step(h, T) for h in hs})
+    else:
+        first = max(1, math.ceil(T / scene.time_scale))
+        if first > max_steps:
+            raise InputError(f"max_steps = {max_steps} is below the first run's {first} steps (T over the "
+                             "scene's time scale): raise it or shorten T")
+        counts = step_counts(first, max_steps)
+    if not scene.has_flow:
+        reference_steps(scene, T)
     solvers = [solver_name(s) for s in setups] + (list(PEERS) if peers else [])
     total = len(solvers)
     report = progress or (lambda done, total, label: None)
@@ -232,14 +250,6 @@ def measure(scene, methods=None, values=None, T=None, hs=None, theta=None, peers
     z_ref, ref, unc = reference(setups[0], T)
     rows = []
     for i, s in enumerate(setups):
-        if hs is not None:
-            counts = sorted({check_step(h, T) for h in hs})
-        else:
-            first = max(1, math.ceil(T / scene.time_scale))
-            if first > max_steps:
-                raise InputError(f"max_steps = {max_steps} is below the first run's {first} steps (T over the "
-                                 "scene's time scale): raise it or shorten T")
-            counts = step_counts(first, max_steps)
         worse = 0
         best = math.inf
         for N in counts:
