@@ -1,8 +1,8 @@
 """The `cosymp` command line: run, scenes, methods, workprecision, report, sweep, compile, bench.
 
 The long commands (workprecision, report, sweep, bench) report their progress on stderr, a bar on a
-terminal and a line per stage otherwise (progress.shown); the report first compiles the kernels it
-needs that the cache lacks, a line each. stdout holds the results alone.
+terminal and a line per stage otherwise (progress.shown); workprecision, report and sweep first
+compile the kernels they need that the cache lacks, a line each. stdout holds the results alone.
 
 Exit codes: 0 done, 2 bad input (one line on stderr saying what to change), 3 a run that
 could not go on (overflow, Newton), also one line.
@@ -14,6 +14,7 @@ import os
 import shlex
 import sys
 import time
+from functools import partial
 
 from .errors import CosympError, InputError, RunError, one_line
 
@@ -175,12 +176,13 @@ def _workprecision(args, out, err):
     if args.long and args.h is not None and len(args.h) != 1:
         raise InputError("--long runs every method at one step size: pass one --h")
     with shown(err) as progress:
+        compile_first = partial(_compile_first, err=err)
         if args.long:
             rows = wp.drift(args.scene, args.methods or wp.DRIFT_METHODS, values, None if args.h is None else args.h[0],
-                            args.horizons, args.theta, progress=progress)
+                            args.horizons, args.theta, progress=progress, prepare=compile_first)
         else:
             rows = wp.measure(args.scene, args.methods, values, args.T, args.h, args.theta, args.peers,
-                              max_steps=args.max_steps, budget=args.budget, progress=progress)
+                              max_steps=args.max_steps, budget=args.budget, progress=progress, prepare=compile_first)
     if args.out:
         wp.write_rows(rows, args.out, wp.DRIFT_FIELDS if args.long else wp.ROW_FIELDS)
     out.write(_drift_table(rows) if args.long else _cost_table(rows))
@@ -194,6 +196,7 @@ def _sweep(args, out, err):
 
     _writable(args.out, sweep.FORMATS, "--out", "a .csv or .parquet file")
     p = sweep.plan(args.scene, args.method, args.vary, args.measure, dict(args.set), args.theta, args.h, args.T)
+    _compile_first(p.unit_keys(), err)
     with shown(err) as progress:
         res = sweep.run(p, workers=args.workers, scheduler=args.scheduler, progress=progress)
     try:

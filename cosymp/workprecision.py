@@ -31,6 +31,7 @@ from functools import partial
 
 import numpy as np
 
+from . import warm
 from .diagnostics import relative_error
 from .drive import CHUNK, Drive, map_every
 from .errors import InputError, RunError
@@ -76,6 +77,13 @@ def _setups(scene, methods, values, theta):
                          "drop theta")
     return scene, [Setup.make(scene, m, values, theta if get_method(m).takes_theta else None)
                    for m in dict.fromkeys(names)]
+
+
+def unit_keys(setups):
+    """The keys of the kernel units (cosymp.warm) that runs of these setups of one scene and their
+    reference (the exact flow, else rk8 and scipy's solvers) need."""
+    scene = setups[0].scene
+    return warm.unit_keys(scene.name, [s.method.name for s in setups] + ["exact" if scene.has_flow else "rk8"])
 
 
 def check_horizon(T):
@@ -221,7 +229,7 @@ def step_counts(first, last):
 
 
 def measure(scene, methods=None, values=None, T=None, hs=None, theta=None, peers=False,
-            rtols=PEER_RTOLS, max_steps=1 << 20, budget=0.2, progress=None, partial=None):
+            rtols=PEER_RTOLS, max_steps=1 << 20, budget=0.2, progress=None, partial=None, prepare=None):
     """Work-precision rows for a scene (see the module's definitions).
 
     hs: step sizes for every method (rounded so T/h is whole); by default each method starts at
@@ -229,7 +237,9 @@ def measure(scene, methods=None, values=None, T=None, hs=None, theta=None, peers
     stops decreasing for two refinements (round-off), or max_steps is reached.
     progress(done, total, label) is called before each run; total counts methods and peers.
     partial(rows), if given, is called with a copy of the rows so far after each run.
-    The input is checked before the first progress report.
+    The input is checked before the first progress report; prepare(keys), if given, is called
+    then, before any run, with the keys of the kernel units the runs need (`unit_keys`): the
+    command line compiles the missing ones there.
     """
     scene, setups = _setups(scene, methods, values, theta)
     T = scene.T if T is None else check_horizon(T)
@@ -243,6 +253,8 @@ def measure(scene, methods=None, values=None, T=None, hs=None, theta=None, peers
         counts = step_counts(first, max_steps)
     if not scene.has_flow:
         reference_steps(scene, T)
+    if prepare is not None:
+        prepare(unit_keys(setups))
     solvers = [solver_name(s) for s in setups] + (list(PEERS) if peers else [])
     total = len(solvers)
     report = progress or (lambda done, total, label: None)
@@ -274,13 +286,14 @@ def measure(scene, methods=None, values=None, T=None, hs=None, theta=None, peers
     return rows
 
 
-def drift(scene, methods=DRIFT_METHODS, values=None, h=None, horizons=None, theta=None, progress=None):
+def drift(scene, methods=DRIFT_METHODS, values=None, h=None, horizons=None, theta=None, progress=None,
+          prepare=None):
     """Error and |H + p_t| at growing horizons, each method at one step size h (default the
     scene's), continuing one run through the horizons. The reference: the exact flow, else rk8
     at h/2 through the same horizons, with rk8 at h for its uncertainty. Default horizons:
     DRIFT_HORIZONS up to DRIFT_MAX_STEPS steps of h. Horizons the reference cannot reach (it
     overflows) are NaN rows whose status says so; progress is reported at least every CHUNK
-    steps, so raising from it stops the run within a fraction of a second."""
+    steps, so raising from it stops the run within a fraction of a second. prepare: as measure's."""
     scene, setups = _setups(scene, methods, values, theta)
     h = scene.h if h is None else h
     check_step(h, h)
@@ -293,6 +306,8 @@ def drift(scene, methods=DRIFT_METHODS, values=None, h=None, horizons=None, thet
     if counts[-1] > DRIFT_MAX_STEPS:
         raise InputError(f"T = {horizons[-1]:g} takes {counts[-1]:.3g} steps of h = {h:g}, over this study's "
                          f"{DRIFT_MAX_STEPS:.0e}: increase h or shorten the horizons")
+    if prepare is not None:
+        prepare(unit_keys(setups))
     total = len(setups) + (0 if scene.has_flow else 1)
     report = progress or (lambda done, total, label: None)
     refs, unc, label, ref_failure = _drift_reference(setups[0], h, counts, report, total)

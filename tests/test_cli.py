@@ -184,3 +184,28 @@ def test_bench_and_report_progress_on_a_pipe(tmp_path):
     path = tmp_path / "r.html"
     out, err = piped("report", "decaying", "-o", str(path))
     assert stages(err)[-1] == "done" and out == f"report written to {path} ({path.stat().st_size / 1e6:.2f} MB)\n"
+
+
+@pytest.mark.parametrize("argv", [
+    ["workprecision", "damped", "--methods", "midpoint", "--T", "5", "--h", "0.5", "--budget", "0.01"],
+    ["workprecision", "damped", "--methods", "midpoint", "--long", "--h", "0.5", "--horizons", "5", "10"],
+    ["sweep", "damped", "--vary", "gamma=0:0.2:2", "--measure", "error_final", "--T", "5"],
+], ids=["workprecision", "workprecision --long", "sweep"])
+def test_long_commands_compile_what_they_need_first_with_a_line_each(argv, tmp_path, monkeypatch):
+    """As the report does: on a cold cache the kernels a command needs (here one unit said to be missing,
+    and one it does not need) are compiled first, a line each, then the stages follow; stdout keeps
+    the results alone. Bad input is refused before any compiling."""
+    from cosymp import warm
+
+    units = {u.key: u for u in warm.units()}
+    monkeypatch.setattr(warm, "missing", lambda: [units["damped/Theta"], units["kapitza/Gauss"]])
+    if argv[0] == "sweep":
+        argv = [*argv, "-o", str(tmp_path / "s.csv")]
+    code, out, err = run_cli(*argv)
+    assert code == 0, err
+    lines = err.splitlines()
+    assert lines[0].startswith("cosymp: compiling 1 groups of kernels") and "damped × Theta" in lines[0]
+    assert "[  1/1]" in lines[1] and "compiled damped × Theta" in lines[1]
+    assert len(lines) > 2 and all(" done] " in line for line in lines[2:]) and "cosymp:" not in out
+    code, out, err = run_cli(*argv, "--theta", "0.3")
+    assert code == 2 and err.count("\n") == 1 and "theta" in err and "compiling" not in err
