@@ -17,7 +17,6 @@ import math
 import re
 import shutil
 import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -31,6 +30,7 @@ from .kernels.loops import energies, propagate_matrix, propagate_members
 from .kernels.registry import family
 from .methods import METHODS
 from .methods import method as get_method
+from .progress import shown
 from .scenes import SCENES
 
 CC = "gcc"
@@ -221,8 +221,9 @@ def _table(rows, out):
                   f"({worst['scene']} {worst['method']})\n")
 
 
-def bench(args, out):
-    """Print (or, with args.json, write as a JSON list) one row per scene x applicable method."""
+def bench(args, out, err):
+    """Print (or, with args.json, write as a JSON list) one row per scene x applicable method, with
+    progress on err (progress.shown: a bar on a terminal, else a line per pair)."""
     if args.steps < 1:
         raise InputError(f"--steps {args.steps} must be at least 1")
     pairs = _pairs(args)
@@ -230,7 +231,7 @@ def bench(args, out):
     if (args.steps + 1) * widest > MAX_RECORDED:
         raise InputError(f"--steps {args.steps} records more than {MAX_RECORDED:.0e} values: "
                          f"pass at most {MAX_RECORDED // widest - 1}")
-    say = (sys.stderr if args.json else out).write
+    say = (err if args.json else out).write
     have_source = C_SOURCE.is_file()
     have_cc = have_source and shutil.which(CC) is not None
     if not have_source:
@@ -242,13 +243,15 @@ def bench(args, out):
         out.write(f"C reference: {CC} {' '.join(CFLAGS)}; numba/C ratio target <= {TARGET}\n")
     mirror = mirrored_scenes() if have_source else {}
     rows = []
-    with tempfile.TemporaryDirectory(prefix="cosymp-bench-") as workdir:
+    with tempfile.TemporaryDirectory(prefix="cosymp-bench-") as workdir, shown(err) as progress:
         libs = {}
-        for scene, method in pairs:
+        for i, (scene, method) in enumerate(pairs):
+            progress(i, len(pairs), f"{scene.name} {method.name}")
             fields = mirror.get(scene.name)
             if have_cc and fields is not None and scene.name not in libs:
                 libs[scene.name] = _compile(scene, workdir)
             rows.append(_measure(Setup.make(scene, method), args.steps, libs.get(scene.name), fields))
+        progress(len(pairs), len(pairs), "done")
     if args.json:
         out.write(json.dumps(rows) + "\n")
     else:

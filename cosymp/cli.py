@@ -1,5 +1,9 @@
 """The `cosymp` command line: run, scenes, methods, workprecision, report, sweep, compile, bench.
 
+The long commands (workprecision, report, sweep, bench) report their progress on stderr, a bar on a
+terminal and a line per stage otherwise (progress.shown); workprecision, report and sweep first
+compile the kernels they need that the cache lacks, a line each. stdout holds the results alone.
+
 Exit codes: 0 done, 2 bad input (one line on stderr saying what to change), 3 a run that
 could not go on (overflow, Newton), also one line.
 """
@@ -10,6 +14,7 @@ import os
 import shlex
 import sys
 import time
+from functools import partial
 
 from .errors import CosympError, InputError, RunError, one_line
 
@@ -155,7 +160,7 @@ def _run(args, out):
 def _workprecision(args, out, err):
     from . import workprecision as wp
     from .integrate import MAX_STEPS
-    from .progress import Bar
+    from .progress import shown
 
     if args.out:
         _writable(args.out, (".csv", ".json"), "--out", "a .csv or .json file")
@@ -168,18 +173,16 @@ def _workprecision(args, out, err):
     if args.long and args.T is not None:
         raise InputError("--long runs to the --horizons (default 1e2 ... 1e6): drop --T")
     values = dict(args.set)
-    bar = Bar(err)
-    try:
+    if args.long and args.h is not None and len(args.h) != 1:
+        raise InputError("--long runs every method at one step size: pass one --h")
+    with shown(err) as progress:
+        compile_first = partial(_compile_first, err=err)
         if args.long:
-            if args.h is not None and len(args.h) != 1:
-                raise InputError("--long runs every method at one step size: pass one --h")
             rows = wp.drift(args.scene, args.methods or wp.DRIFT_METHODS, values, None if args.h is None else args.h[0],
-                            args.horizons, args.theta, progress=bar)
+                            args.horizons, args.theta, progress=progress, prepare=compile_first)
         else:
             rows = wp.measure(args.scene, args.methods, values, args.T, args.h, args.theta, args.peers,
-                              max_steps=args.max_steps, budget=args.budget, progress=bar)
-    finally:
-        bar.close()
+                              max_steps=args.max_steps, budget=args.budget, progress=progress, prepare=compile_first)
     if args.out:
         wp.write_rows(rows, args.out, wp.DRIFT_FIELDS if args.long else wp.ROW_FIELDS)
     out.write(_drift_table(rows) if args.long else _cost_table(rows))
@@ -189,15 +192,13 @@ def _workprecision(args, out, err):
 
 def _sweep(args, out, err):
     from . import sweep
-    from .progress import Bar
+    from .progress import shown
 
     _writable(args.out, sweep.FORMATS, "--out", "a .csv or .parquet file")
     p = sweep.plan(args.scene, args.method, args.vary, args.measure, dict(args.set), args.theta, args.h, args.T)
-    bar = Bar(err)
-    try:
-        res = sweep.run(p, workers=args.workers, scheduler=args.scheduler, progress=bar)
-    finally:
-        bar.close()
+    _compile_first(p.unit_keys(), err)
+    with shown(err) as progress:
+        res = sweep.run(p, workers=args.workers, scheduler=args.scheduler, progress=progress)
     try:
         sweep.write(res, args.out)
     except OSError as e:
@@ -206,9 +207,12 @@ def _sweep(args, out, err):
 
 
 def _writable(path, suffixes, option, what):
-    """InputError before any work if `path` has the wrong suffix or its folder cannot be written."""
+    """InputError before any work if `path` has the wrong suffix, is a folder or its folder cannot be
+    written."""
     if not path.endswith(suffixes):
         raise InputError(f"{option} {path}: name {what}")
+    if os.path.isdir(path):
+        raise InputError(f"cannot write {path}: it is a folder; choose another file")
     folder = os.path.dirname(os.path.abspath(path))
     if not (os.path.isdir(folder) and os.access(folder, os.W_OK)):
         raise InputError(f"cannot write {path}: {folder} is not a writable folder; choose another file")
@@ -221,7 +225,7 @@ def _report(args, out, err):
     from . import warm
     from .integrate import Setup, check_step, get_scene
     from .methods import method
-    from .progress import for_stream
+    from .progress import shown
     from .reference import check_reference
     from .report import write
 
@@ -243,8 +247,7 @@ def _report(args, out, err):
         check_reference(setups[0], check_step(h, T) * h)
         keys = warm.unit_keys(scene.name, [s.method.name for s in setups] + ["exact" if scene.has_flow else "rk8"])
     _compile_first(keys, err)
-    progress = for_stream(err)
-    try:
+    with shown(err) as progress:
         if args.target == "paper":
             cmd = " ".join(["cosymp report paper"] + ["--quick"] * args.quick
                            + ["--no-work-precision"] * args.no_work_precision + ["-o", shlex.quote(args.out)])
@@ -252,8 +255,6 @@ def _report(args, out, err):
                                   command=cmd)
         else:
             report = scene_report(setups, h, T, command(setups, h, T, args.out), progress=progress)
-    finally:
-        progress.close()
     try:
         size = write(report, args.out)
     except OSError as e:
@@ -407,7 +408,7 @@ def main(argv=None, out=None, err=None):
         else:
             from .bench import bench
 
-            bench(args, out)
+            bench(args, out, err)
     except InputError as e:
         err.write(f"cosymp: {e}\n")
         return 2

@@ -120,7 +120,7 @@ class Drive:
         self.t = self.t0 + self.done * self.h
         if status != OK:
             step = round(self.t0 / self.h) + self.done
-            msg = failure_message(status, step, self.t, self.h, not in_tangent and _exact_overflows(s, self.t))
+            msg = failure_message(status, step, self.t, self.h, not in_tangent and _exact_overflows(s, self.t, self.h))
             self.failure = f"tangent map: {msg}" if in_tangent else msg
             bins = -(-k // self.width) if self.width else 0
         if not self.width:
@@ -175,7 +175,8 @@ class Drive:
         self.t = self.t0 + self.done * self.h
         if status != OK:
             step = round(self.t0 / self.h) + self.done
-            msg = failure_message(status, step, self.t, self.h, not in_tangent and _exact_overflows(self.setup, self.t))
+            overflows = not in_tangent and _exact_overflows(self.setup, self.t, self.h)
+            msg = failure_message(status, step, self.t, self.h, overflows)
             self.failure = traj.failure = f"tangent map: {msg}" if in_tangent else msg
             raise RunError(self.failure, self.t, self.done, traj)
         if not self.want & WANT_MAPS:

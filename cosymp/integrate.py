@@ -226,16 +226,36 @@ def simulate(setup, h, T, z0=None, stride=None, increments=False, t0=0.0, pt0=No
     traj = Trajectory(setup, h, stride, Trec[:kept], Zrec[:kept], PTrec[:kept], H[:kept], done, wall,
                       dZrec[:kept] if increments else None)
     t_fail = t0 + done * h
-    traj.failure = failure_message(status, round(t0 / h) + done, t_fail, h, _exact_overflows(setup, t_fail))
+    traj.failure = failure_message(status, round(t0 / h) + done, t_fail, h, _exact_overflows(setup, t_fail, h))
     raise RunError(traj.failure, t_fail, done, traj)
 
 
-def _exact_overflows(setup, t):
-    """Whether the scene's exact flow itself leaves floating-point range by t (then no step size helps)."""
+def exact_flow(exact, z, pt, t0, t1, shortest):
+    """(z, p_t) of the exact flow (setup `exact`) carried from t0 (z, pt; None: the scene's initial
+    state and p_t = -H there) to t1 in one step, which is exact at any length; a step that fails is
+    split in halves down to `shortest`. A long step fails before the state does: the damped
+    oscillator's coefficients e^(±γ s) over a step of length s pass floating point at γ s = 709,
+    while its state stays finite to γ t = 1420 (a single step from 0 ended its reference at T = 5000
+    for γ = 0.2, which reaches 7098). RunError where a step of `shortest` fails: there the state
+    itself overflows."""
+    try:
+        run = simulate(exact, t1 - t0, t1 - t0, z0=z, pt0=pt, t0=t0)
+    except RunError:
+        if t1 - t0 <= shortest:
+            raise
+        middle = t0 + 0.5 * (t1 - t0)
+        z, pt = exact_flow(exact, z, pt, t0, middle, shortest)
+        return exact_flow(exact, z, pt, middle, t1, shortest)
+    return run.z[-1], run.pt[-1]
+
+
+def _exact_overflows(setup, t, h):
+    """Whether the scene's exact flow itself leaves floating-point range by t (then no step size
+    helps), carried in steps of at most t (exact_flow) down to h where one fails."""
     if not setup.scene.has_flow or setup.method.requires == "flow":
         return False
     try:
-        z = simulate(Setup.make(setup.scene, "exact", setup.values), t, t).z[-1, 0]
+        z, _ = exact_flow(Setup.make(setup.scene, "exact", setup.values), None, None, 0.0, t, h)
     except RunError:
         return True
     return not np.all(np.abs(z) < 1e300)

@@ -33,6 +33,7 @@ from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
 import numpy as np
 
+from . import warm
 from .diagnostics import relative_error
 from .drive import batch_runs, batchable
 from .errors import CosympError, InputError, as_number, quoted
@@ -132,6 +133,13 @@ class Plan:
         """{name: (len(indices),) array} of the varied names' values at flat indices."""
         idx = np.unravel_index(np.asarray(indices, dtype=np.int64), self.shape)
         return {a.name: np.asarray(a.values)[i] for a, i in zip(self.axes, idx)}
+
+    def unit_keys(self):
+        """The keys of the kernel units (cosymp.warm) its points need: the method's, and the
+        reference's for error_final (the exact flow, else rk8)."""
+        scene = get_scene(self.scene)
+        ref = ["exact" if scene.has_flow else "rk8"] if "error_final" in self.measures else []
+        return warm.unit_keys(self.scene, [self.method, *ref])
 
     def step_counts(self):
         """(steps of each (h, T) pair of the grid, how many points share each pair): from the h and

@@ -31,10 +31,11 @@ from functools import partial
 
 import numpy as np
 
+from . import warm
 from .diagnostics import relative_error
 from .drive import CHUNK, Drive, map_every
 from .errors import InputError, RunError
-from .integrate import MAX_STEPS, Setup, check_step, get_scene, simulate
+from .integrate import MAX_STEPS, Setup, check_step, exact_flow, get_scene, simulate
 from .kernels.loops import energies
 from .kernels.registry import family
 from .methods import METHODS
@@ -78,6 +79,13 @@ def _setups(scene, methods, values, theta):
                    for m in dict.fromkeys(names)]
 
 
+def unit_keys(setups):
+    """The keys of the kernel units (cosymp.warm) that runs of these setups of one scene and their
+    reference (the exact flow, else rk8 and scipy's solvers) need."""
+    scene = setups[0].scene
+    return warm.unit_keys(scene.name, [s.method.name for s in setups] + ["exact" if scene.has_flow else "rk8"])
+
+
 def check_horizon(T):
     """T as a float, or InputError saying what to change."""
     if not isinstance(T, (int, float)) or not math.isfinite(T) or T <= 0:
@@ -116,20 +124,27 @@ def peer_solve(setup, solver, T, rtol):
     return scipy_reference(setup, T, rtol=rtol, atol=rtol, method=solver)
 
 
+def reference_steps(scene, T):
+    """Steps of the rk8 run that checks the reference to T (scenes without an exact flow), or
+    InputError past the step cap."""
+    steps = max(1, math.ceil(T / (0.01 * scene.time_scale)))
+    if steps > MAX_STEPS:
+        raise InputError(f"T = {T:g} is too long for a reference solution ({steps:.3g} steps of rk8 beyond the "
+                         f"cap of {MAX_STEPS:.0e}): shorten T")
+    return steps
+
+
 def reference(setup, T):
     """(z_ref at T, label, uncertainty): the exact flow, else scipy DOP853 at 3e-14 (tighter
     than any peer run) checked against cosymp's rk8 at a step of 1% of the scene's time scale."""
     scene = setup.scene
     if scene.has_flow:
         try:
-            z, _ = _flow(Setup.make(scene, "exact", setup.values), None, None, 0.0, T, 0.01 * scene.time_scale)
+            z, _ = exact_flow(Setup.make(scene, "exact", setup.values), None, None, 0.0, T, 0.01 * scene.time_scale)
         except RunError as e:
             raise RunError(_beyond("the exact flow", T, e.time, T) + ", or a shorter T", T, 0) from None
         return z[0], "exact flow", 0.0
-    steps = max(1, math.ceil(T / (0.01 * scene.time_scale)))
-    if steps > MAX_STEPS:
-        raise InputError(f"T = {T:g} is too long for a reference solution ({steps:.3g} steps of rk8 beyond the "
-                         f"cap of {MAX_STEPS:.0e}): shorten T")
+    steps = reference_steps(scene, T)
     sol = peer_solve(setup, "DOP853", T, REFERENCE_RTOL)
     if sol.status != 0:
         raise RunError(f"reference DOP853 failed: {sol.message}", T, 0)
@@ -214,7 +229,7 @@ def step_counts(first, last):
 
 
 def measure(scene, methods=None, values=None, T=None, hs=None, theta=None, peers=False,
-            rtols=PEER_RTOLS, max_steps=1 << 20, budget=0.2, progress=None, partial=None):
+            rtols=PEER_RTOLS, max_steps=1 << 20, budget=0.2, progress=None, partial=None, prepare=None):
     """Work-precision rows for a scene (see the module's definitions).
 
     hs: step sizes for every method (rounded so T/h is whole); by default each method starts at
@@ -222,9 +237,24 @@ def measure(scene, methods=None, values=None, T=None, hs=None, theta=None, peers
     stops decreasing for two refinements (round-off), or max_steps is reached.
     progress(done, total, label) is called before each run; total counts methods and peers.
     partial(rows), if given, is called with a copy of the rows so far after each run.
+    The input is checked before the first progress report; prepare(keys), if given, is called
+    then, before any run, with the keys of the kernel units the runs need (`unit_keys`): the
+    command line compiles the missing ones there.
     """
     scene, setups = _setups(scene, methods, values, theta)
     T = scene.T if T is None else check_horizon(T)
+    if hs is not None:
+        counts = sorted({check_step(h, T) for h in hs})
+    else:
+        first = max(1, math.ceil(T / scene.time_scale))
+        if first > max_steps:
+            raise InputError(f"max_steps = {max_steps} is below the first run's {first} steps (T over the "
+                             "scene's time scale): raise it or shorten T")
+        counts = step_counts(first, max_steps)
+    if not scene.has_flow:
+        reference_steps(scene, T)
+    if prepare is not None:
+        prepare(unit_keys(setups))
     solvers = [solver_name(s) for s in setups] + (list(PEERS) if peers else [])
     total = len(solvers)
     report = progress or (lambda done, total, label: None)
@@ -232,14 +262,6 @@ def measure(scene, methods=None, values=None, T=None, hs=None, theta=None, peers
     z_ref, ref, unc = reference(setups[0], T)
     rows = []
     for i, s in enumerate(setups):
-        if hs is not None:
-            counts = sorted({check_step(h, T) for h in hs})
-        else:
-            first = max(1, math.ceil(T / scene.time_scale))
-            if first > max_steps:
-                raise InputError(f"max_steps = {max_steps} is below the first run's {first} steps (T over the "
-                                 "scene's time scale): raise it or shorten T")
-            counts = step_counts(first, max_steps)
         worse = 0
         best = math.inf
         for N in counts:
@@ -264,13 +286,14 @@ def measure(scene, methods=None, values=None, T=None, hs=None, theta=None, peers
     return rows
 
 
-def drift(scene, methods=DRIFT_METHODS, values=None, h=None, horizons=None, theta=None, progress=None):
+def drift(scene, methods=DRIFT_METHODS, values=None, h=None, horizons=None, theta=None, progress=None,
+          prepare=None):
     """Error and |H + p_t| at growing horizons, each method at one step size h (default the
     scene's), continuing one run through the horizons. The reference: the exact flow, else rk8
     at h/2 through the same horizons, with rk8 at h for its uncertainty. Default horizons:
     DRIFT_HORIZONS up to DRIFT_MAX_STEPS steps of h. Horizons the reference cannot reach (it
     overflows) are NaN rows whose status says so; progress is reported at least every CHUNK
-    steps, so raising from it stops the run within a fraction of a second."""
+    steps, so raising from it stops the run within a fraction of a second. prepare: as measure's."""
     scene, setups = _setups(scene, methods, values, theta)
     h = scene.h if h is None else h
     check_step(h, h)
@@ -283,6 +306,8 @@ def drift(scene, methods=DRIFT_METHODS, values=None, h=None, horizons=None, thet
     if counts[-1] > DRIFT_MAX_STEPS:
         raise InputError(f"T = {horizons[-1]:g} takes {counts[-1]:.3g} steps of h = {h:g}, over this study's "
                          f"{DRIFT_MAX_STEPS:.0e}: increase h or shorten the horizons")
+    if prepare is not None:
+        prepare(unit_keys(setups))
     total = len(setups) + (0 if scene.has_flow else 1)
     report = progress or (lambda done, total, label: None)
     refs, unc, label, ref_failure = _drift_reference(setups[0], h, counts, report, total)
@@ -330,7 +355,7 @@ def _drift_reference(setup, h, counts, report, total):
         refs, z, pt, t = [], None, None, 0.0
         for N in counts:
             try:
-                z, pt = _flow(exact, z, pt, t, N * h, h)
+                z, pt = exact_flow(exact, z, pt, t, N * h, h)
             except RunError as e:
                 return refs, [0.0] * len(refs), "exact flow", _beyond("the exact flow", N * h, e.time, counts[-1] * h)
             refs.append(z[0])
@@ -342,24 +367,6 @@ def _drift_reference(setup, h, counts, report, total):
     coarse, _ = _checkpoints(rk8, h, counts[:len(fine)], tick)
     why = _beyond("the rk8 reference", counts[len(fine)] * h, failed.time, counts[-1] * h) if failed else ""
     return fine, [relative_error(c, f)[0] for f, c in zip(fine, coarse)], "rk8 at h/2", why
-
-
-def _flow(exact, z, pt, t0, t1, shortest):
-    """(z, p_t) of the exact flow carried from t0 (z, pt; None: the scene's initial state) to t1
-    in one step, which is exact at any length; a step that fails is split in halves down to
-    `shortest`. A long step fails before the state does: the damped oscillator's coefficients
-    e^(±γ s) over a step of length s pass floating point at γ s = 709, while its state stays finite
-    to γ t = 1420 (a single step from 0 ended its reference at T = 5000 for γ = 0.2, which
-    reaches 7098). RunError where a step of `shortest` fails: there the state itself overflows."""
-    try:
-        run = simulate(exact, t1 - t0, t1 - t0, z0=z, pt0=pt, t0=t0)
-    except RunError:
-        if t1 - t0 <= shortest:
-            raise
-        middle = t0 + 0.5 * (t1 - t0)
-        z, pt = _flow(exact, z, pt, t0, middle, shortest)
-        return _flow(exact, z, pt, middle, t1, shortest)
-    return run.z[-1], run.pt[-1]
 
 
 def _beyond(what, T, t, top):

@@ -13,8 +13,8 @@ from cosymp.cli import main
 ARGS = ["bench", "--steps", "20000", "--scenes", "damped", "--methods", "midpoint", "rk4", "--json"]
 
 
-def _rows(argv):
-    out, err = StringIO(), StringIO()
+def _rows(argv, err=None):
+    out, err = StringIO(), err or StringIO()
     assert main(argv, out=out, err=err) == 0, err.getvalue()
     return json.loads(out.getvalue())
 
@@ -33,10 +33,11 @@ def test_bench_rows_and_c_mirror_agrees():
         assert r["agree"], f"C and numba final states differ for {r['method']}: rel {r['rel_diff']:.1e}"
 
 
-def test_bench_without_compiler_still_gives_numba_figures(monkeypatch, capsys):
+def test_bench_without_compiler_still_gives_numba_figures(monkeypatch):
     monkeypatch.setattr(bench, "CC", "cosymp-no-such-compiler")
-    rows = _rows(ARGS[:5] + ["--methods", "midpoint", "--json"])
-    assert "not found" in capsys.readouterr().err
+    err = StringIO()
+    rows = _rows(ARGS[:5] + ["--methods", "midpoint", "--json"], err)
+    assert "not found" in err.getvalue()
     assert len(rows) == 1 and rows[0]["numba_ns"] > 0
     assert rows[0]["c_ns"] is None and rows[0]["ratio"] is None and rows[0]["agree"] is None
 
@@ -65,9 +66,11 @@ def test_bench_names_the_pairs_its_c_mirror_lacks(monkeypatch):
     assert out.getvalue().splitlines()[-1] == "no C mirror in bench_ref.c (numba figures only) for modulated: leapfrog"
 
 
-def test_bench_without_the_c_source_says_where_it_is(monkeypatch, tmp_path, capsys):
-    """An installed package has no benchmarks/: the bench gives numba figures and says why."""
+def test_bench_without_the_c_source_says_where_it_is(monkeypatch, tmp_path):
+    """An installed package has no benchmarks/: the bench gives numba figures and says why (on the
+    command's stderr, with --json)."""
     monkeypatch.setattr(bench, "C_SOURCE", tmp_path / "benchmarks" / "bench_ref.c")
-    rows = _rows(["bench", "--steps", "100", "--scenes", "decaying", "--methods", "euler", "--json"])
-    assert "benchmarks/bench_ref.c is not in this installation" in capsys.readouterr().err
+    err = StringIO()
+    rows = _rows(["bench", "--steps", "100", "--scenes", "decaying", "--methods", "euler", "--json"], err)
+    assert "benchmarks/bench_ref.c is not in this installation" in err.getvalue()
     assert rows[0]["c_ns"] is None and rows[0]["numba_ns"] > 0 and rows[0]["mirrored"] is False

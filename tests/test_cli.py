@@ -1,6 +1,7 @@
 """The command-line contract: JSON fields, listings, and one-line errors for bad input."""
 import io
 import json
+import math
 import subprocess
 import sys
 
@@ -124,3 +125,87 @@ def test_run_gives_the_same_relative_error_as_the_comparison():
     assert code == 0, err
     c = compare(Setup.make("damped", "midpoint"), 0.1, 50.0)
     assert json.loads(out)["error_final"] == pytest.approx(float(c.error[-1]), rel=1e-9) == pytest.approx(0.125, abs=1e-3)
+
+
+def test_run_error_where_one_exact_step_over_T_overflows():
+    """damped at gamma T = 1000: the reference was one exact step over T, which overflows (the run
+    exited 3 with 'overflow ... reduce h'); carried in pieces it is the comparison's exact flow of
+    10^4 steps, to their rounding of the phase."""
+    from cosymp.integrate import Setup
+    from cosymp.study import compare
+
+    code, out, err = run_cli("run", "damped", "--method", "gauss4", "--set", "gamma=1", "--h", "0.1", "--T", "1000",
+                             "--json")
+    assert code == 0, err
+    c = compare(Setup.make("damped", "gauss4", {"gamma": 1.0}), 0.1, 1000.0)
+    assert json.loads(out)["error_final"] == pytest.approx(float(c.error[-1]), rel=1e-5) == pytest.approx(0.0115, rel=0.01)
+
+
+def piped(*argv):
+    """python -m cosymp with stdout and stderr both pipes (not terminals), as in a CI log."""
+    r = subprocess.run([sys.executable, "-m", "cosymp", *argv], check=False, capture_output=True, text=True,
+                       timeout=600)
+    assert r.returncode == 0, r.stderr
+    return r.stdout, r.stderr.splitlines()
+
+
+def stages(err):
+    """The stage labels of the progress lines on stderr ('cosymp:  1.2 s  [k/n done] LABEL')."""
+    assert err and all(line.startswith("cosymp: ") for line in err), err
+    return [line.split(" done] ", 1)[1] for line in err]
+
+
+def test_long_commands_report_progress_on_a_pipe_and_keep_stdout_clean(tmp_path):
+    """workprecision and sweep printed nothing on stderr off a terminal (report and bench: see below):
+    each long command now writes a line per stage there, and stdout holds its results alone."""
+    import csv
+
+    path = tmp_path / "wp.json"
+    out, err = piped("workprecision", "damped", "--methods", "midpoint", "rk4", "--T", "20", "--budget", "0.01",
+                     "--out", str(path))
+    assert stages(err)[0] == "reference" and stages(err)[-1] == "done" and "rk4 h = 1" in stages(err)
+    assert out.startswith("damped to T = 20;") and "cosymp:" not in out and out.endswith(f"written to {path}\n")
+    assert {r["solver"] for r in json.loads(path.read_text())} == {"midpoint", "rk4"}
+
+    path = tmp_path / "s.csv"
+    out, err = piped("sweep", "damped", "--vary", "gamma=0.9:1:2", "--measure", "error_final", "--h", "0.1",
+                     "--T", "1000", "-o", str(path))
+    assert stages(err)[0].startswith("first points") and stages(err)[-1] == "points" and "[2/2 done]" in err[-1]
+    assert out.startswith("damped with midpoint: 2 points") and "cosymp:" not in out
+    rows = list(csv.DictReader(path.open()))
+    assert [r["status"] for r in rows] == ["ok", "ok"] and all(math.isfinite(float(r["error_final"])) for r in rows)
+
+
+def test_bench_and_report_progress_on_a_pipe(tmp_path):
+    """bench printed no progress at all; the report already did. With --json, stdout is the JSON alone."""
+    out, err = piped("bench", "--steps", "100", "--scenes", "decaying", "--methods", "euler", "midpoint", "--json")
+    assert [r["method"] for r in json.loads(out)] == ["euler", "midpoint"]
+    assert stages([line for line in err if "done]" in line]) == ["decaying euler", "decaying midpoint", "done"]
+    path = tmp_path / "r.html"
+    out, err = piped("report", "decaying", "-o", str(path))
+    assert stages(err)[-1] == "done" and out == f"report written to {path} ({path.stat().st_size / 1e6:.2f} MB)\n"
+
+
+@pytest.mark.parametrize("argv", [
+    ["workprecision", "damped", "--methods", "midpoint", "--T", "5", "--h", "0.5", "--budget", "0.01"],
+    ["workprecision", "damped", "--methods", "midpoint", "--long", "--h", "0.5", "--horizons", "5", "10"],
+    ["sweep", "damped", "--vary", "gamma=0:0.2:2", "--measure", "error_final", "--T", "5"],
+], ids=["workprecision", "workprecision --long", "sweep"])
+def test_long_commands_compile_what_they_need_first_with_a_line_each(argv, tmp_path, monkeypatch):
+    """As the report does: on a cold cache the kernels a command needs (here one unit said to be missing,
+    and one it does not need) are compiled first, a line each, then the stages follow; stdout keeps
+    the results alone. Bad input is refused before any compiling."""
+    from cosymp import warm
+
+    units = {u.key: u for u in warm.units()}
+    monkeypatch.setattr(warm, "missing", lambda: [units["damped/Theta"], units["kapitza/Gauss"]])
+    if argv[0] == "sweep":
+        argv = [*argv, "-o", str(tmp_path / "s.csv")]
+    code, out, err = run_cli(*argv)
+    assert code == 0, err
+    lines = err.splitlines()
+    assert lines[0].startswith("cosymp: compiling 1 groups of kernels") and "damped × Theta" in lines[0]
+    assert "[  1/1]" in lines[1] and "compiled damped × Theta" in lines[1]
+    assert len(lines) > 2 and all(" done] " in line for line in lines[2:]) and "cosymp:" not in out
+    code, out, err = run_cli(*argv, "--theta", "0.3")
+    assert code == 2 and err.count("\n") == 1 and "theta" in err and "compiling" not in err

@@ -14,7 +14,7 @@ from cosymp.errors import RunError
 from cosymp.integrate import simulate
 from cosymp.kernels.loops import vector_field
 from cosymp.methods import METHODS
-from cosymp.reference import scipy_reference
+from cosymp.reference import reference_final, scipy_reference
 from cosymp.scenes import SCENES
 
 # ------------------------------------------------------------------ explicit stability limits
@@ -242,6 +242,55 @@ def test_damped_where_the_state_itself_overflows_says_so():
         with pytest.raises(RunError, match="left floating-point range") as info:
             simulate(setup("damped", method, gamma=0.2), 0.1, 8000.0, stride=1000)
         assert 7090 < info.value.time < 7100
+
+
+def damped_closed_form(gamma, t, q0=1.0, p0=1.0):
+    """(q, p)(t) of q'' - gamma q' + q = 0 (m = w0 = 1, gamma < 2) with p = e^(-gamma t) q'."""
+    W = math.sqrt(1.0 - gamma * gamma / 4)
+    C, S, dC, dS = math.cos(W * t), math.sin(W * t) / W, -W * math.sin(W * t), math.cos(W * t)
+    a, b = q0, p0 - gamma * q0 / 2  # q = e^(gamma t/2) (a C + b S)
+    q = math.exp(gamma * t / 2) * (a * C + b * S)
+    dq = math.exp(gamma * t / 2) * (gamma / 2 * (a * C + b * S) + a * dC + b * dS)
+    return q, math.exp(-gamma * t) * dq
+
+
+def test_damped_reference_reaches_where_the_state_does():
+    """gamma T = 1000: the exact flow's one-step map over T passes floating point (e^(gamma T/2)
+    beyond 709), the state (q ~ 1e215, p ~ 1e-218) does not. reference_final splits its exact
+    step, agreeing with the closed form, and with 10^4 exact steps of h to their rounding of the
+    phase (3e-11); within range it is still the one exact step, bit for bit."""
+    s = setup("damped", "midpoint", gamma=1.0)
+    with pytest.raises(RunError, match="left floating-point range"):
+        simulate(setup("damped", "exact", gamma=1.0), 1000.0, 1000.0)
+    z, spread = reference_final(s, 0.1, 1000.0)
+    stepwise = simulate(setup("damped", "exact", gamma=1.0), 0.1, 1000.0, stride=10_000).z[-1]
+    assert 1e214 < abs(z[0, 0]) < 1e216 and 1e-219 < abs(z[0, 1]) < 1e-217 and spread[0] == 0.0
+    assert z[0] == pytest.approx(damped_closed_form(1.0, 1000.0), rel=1e-10)
+    assert z[0] == pytest.approx(stepwise[0], rel=1e-9)
+    short = setup("damped", "midpoint", gamma=0.2)
+    one_step = simulate(setup("damped", "exact", gamma=0.2), 50.0, 50.0).z[-1]
+    assert np.array_equal(reference_final(short, 0.1, 50.0)[0], one_step)
+
+
+def test_damped_reference_beyond_floating_point_says_where():
+    """At gamma = 1 the true q passes 1.8e308 at gamma t / 2 = ln(1.8e308 / |a C + b S|), near t = 1420:
+    the reference says so and where, within a step."""
+    with pytest.raises(RunError, match="the exact flow, leaves floating-point range at t ≈ 14") as info:
+        reference_final(setup("damped", "midpoint", gamma=1.0), 0.1, 1500.0)
+    assert 1415 < info.value.time < 1425
+
+
+def test_a_method_overflowing_before_the_exact_state_is_told_to_reduce_h():
+    """Explicit Euler at h = 0.5 and RK4 at h = 2.5 leave floating point at gamma = 1 near t = 982 and
+    755, where the exact state is finite (to t = 1420) but one exact step from 0 is not: the
+    message says to reduce h, not that no step size helps; midpoint at h = 0.1 passes t = 1300."""
+    for method, h in (("euler", 0.5), ("rk4", 2.5)):
+        with pytest.raises(RunError, match="reduce h if the solution should stay bounded") as info:
+            simulate(setup("damped", method, gamma=1.0), h, 1300.0, stride=1000)
+        assert 709 < info.value.time < 1300
+    simulate(setup("damped", "midpoint", gamma=1.0), 0.1, 1300.0, stride=1000)
+    with pytest.raises(RunError, match="as the exact solution does by then"):
+        simulate(setup("damped", "midpoint", gamma=1.0), 0.1, 1500.0, stride=1000)
 
 
 def test_damped_scaling_matches_the_unscaled_step_to_round_off():

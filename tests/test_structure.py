@@ -47,13 +47,27 @@ def test_boris_preserves_volume():
     assert np.max(det_deviation(M)) < ROUNDOFF
 
 
+@pytest.mark.parametrize("lam", [1.0, 0.02, 0.3, 2.5])
 @pytest.mark.parametrize("h", [0.05, 0.1, 0.3])
-def test_euler_determinant_on_opening_example(h):
-    """The paper's Sec. 1: det = 1 + h^2 e^{-2 t_k} > 1."""
-    run = simulate(setup("decaying", "euler"), h, 40 * h)
+def test_euler_determinant_on_opening_example(h, lam):
+    """The paper's Sec. 1 (lambda = 1), and the scene's text for any lambda: M = [[1, h a], [-h a, 1]]
+    with a = e^{-lambda t_k}, so det = 1 + h^2 e^{-2 lambda t_k} > 1."""
+    run = simulate(setup("decaying", "euler", lam=lam), h, 40 * h)
     M = tangent_maps(run)
-    expected = 1 + h ** 2 * np.exp(-2 * run.t[:-1])
+    expected = 1 + h ** 2 * np.exp(-2 * lam * run.t[:-1])
     assert np.allclose(np.linalg.det(M), expected, rtol=1e-14, atol=0)
+
+
+@pytest.mark.parametrize("lam", [1.0, 0.02, 0.3, 2.5])
+def test_opening_example_exact_step_is_the_stated_rotation(lam):
+    """q' = a p, p' = -a q with a = e^{-lambda t}: each exact step rotates (q, p) clockwise by the
+    integral of a over the step, (e^{-lambda t_k} - e^{-lambda t_(k+1)}) / lambda."""
+    h = 0.2
+    run = simulate(setup("decaying", "exact", lam=lam), h, 30 * h, z0=[[1.0, 0.0]])
+    q, p = run.z[:, 0, 0], run.z[:, 0, 1]
+    angles = np.diff(np.unwrap(np.arctan2(-p, q)))
+    t = run.t[:-1]
+    assert np.allclose(angles, (np.exp(-lam * t) - np.exp(-lam * (t + h))) / lam, rtol=0, atol=1e-13)
 
 
 def _rk4_factor(h, a1, a2, a3):

@@ -19,6 +19,7 @@ import pytest
 
 from cosymp import sweep
 from cosymp.cli import main
+from cosymp.diagnostics import relative_error
 from cosymp.errors import InputError
 from cosymp.integrate import MAX_STEPS, Setup, simulate
 from cosymp.reference import scipy_reference
@@ -298,6 +299,19 @@ def test_exact_flow_keeps_H_ext_and_has_no_error(scene):
     assert np.max(r.values["error_final"]) < 1e-12
 
 
+def test_error_final_where_one_exact_step_over_T_overflows():
+    """gamma T = 1000: one exact step over T leaves floating point (every point's error_final was NaN
+    with an overflow status) while the state does not (q ~ 1e215, p ~ 1e-218). Each point's error is
+    now its distance from 10^4 exact steps of h, to their rounding of the phase (3e-11)."""
+    p = sweep.plan("damped", "gauss4", ["gamma=0.9:1:2"], ["error_final"], h=0.1, T=1000.0)
+    r = sweep.run(p)
+    assert list(r.status) == ["ok", "ok"]
+    for gamma, error in zip(hs(p, "gamma"), r.values["error_final"]):
+        run, exact = (simulate(Setup.make("damped", m, {"gamma": gamma}), 0.1, 1000.0, stride=10_000).z[-1, 0]
+                      for m in ("gauss4", "exact"))
+        assert 1e-6 < error < 0.1 and error == pytest.approx(relative_error(run, exact)[0], rel=1e-5)
+
+
 @pytest.mark.parametrize("scene,method,order", [
     ("damped", "midpoint", 2), ("damped", "rk4", 4), ("damped", "gauss4", 4),
     ("damped", "symplectic-euler", 1),
@@ -571,7 +585,8 @@ def test_cli_wrong_output_suffix_is_refused_before_work(tmp_path):
 
 
 def test_cli_unwritable_output_is_one_line_error(tmp_path):
-    """-o naming a folder: a one-line error with exit 2, not a traceback after the whole sweep."""
+    """-o naming a folder: a one-line error with exit 2 before any work, not a traceback after the
+    whole sweep."""
     folder = tmp_path / "dir.csv"
     folder.mkdir()
     try:
@@ -588,7 +603,9 @@ def test_cli_unreachable_scheduler_is_a_one_line_error(tmp_path):
     start = time.perf_counter()
     code, _, err = run_cli(*GRID, "--scheduler", "tcp://127.0.0.1:1", "-o", str(tmp_path / "x.csv"))
     took = time.perf_counter() - start
-    assert code == 2 and one_line_error(err), err
+    *progress, last = err.splitlines(keepends=True)
+    # the first two points are computed here before the cluster is reached: their progress lines come first
+    assert code == 2 and one_line_error(last) and all(" done] " in line for line in progress), err
     assert "cannot reach a Dask scheduler at 'tcp://127.0.0.1:1'" in err
     assert took < 30
     assert not (tmp_path / "x.csv").exists()

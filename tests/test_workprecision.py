@@ -352,3 +352,16 @@ def test_rk4_error_grows_quadratically_on_the_pendulum():
     rows = wp.drift("kapitza", ["rk4", "gauss4"], {"a": 0.0, "q0": 1.0}, h=0.05, horizons=[500.0, 1e3, 2e3, 5e3, 1e4, 2e4])
     assert wp.growth_exponent(rows, "rk4") > 1.7
     assert wp.growth_exponent(rows, "gauss4") == pytest.approx(1.0, abs=0.15)
+
+
+def test_progress_off_a_terminal_counts_under_one_label_every_few_seconds():
+    """A count under one label (a sweep's points, done after each task) is not a line per task: a line
+    at most every `every` seconds, and one when the count reaches the total."""
+    stream = io.StringIO()
+    lines = Lines(stream, every=3600.0)
+    lines(0, 100, "first points")
+    for done in range(2, 100, 7):
+        lines(done, 100, "points")
+    lines(100, 100, "points")
+    said = [line.split("s  ", 1)[1] for line in stream.getvalue().splitlines()]
+    assert said == ["[0/100 done] first points", "[2/100 done] points", "[100/100 done] points"]

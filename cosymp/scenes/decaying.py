@@ -47,9 +47,9 @@ def drift(P, t0, tau, z):
 SCENE = Scene(
     name="decaying",
     title="Opening example: oscillator with decaying Hamiltonian",
-    summary="H = e^(−t) (p² + q²)/2, the paper's first example; its exact flow is a rotation by "
-            "e^(−t_k) − e^(−t_(k+1)) per step.",
-    look_for="Explicit Euler's one-step determinant is 1 + h² e^(−2t_k) > 1: the orbit spirals out. "
+    summary="H = e^(−λt) (p² + q²)/2, the paper's first example (λ = 1 there); its exact flow is a rotation "
+            "by (e^(−λt_k) − e^(−λt_(k+1)))/λ per step.",
+    look_for="Explicit Euler's one-step determinant is 1 + h² e^(−2λt_k) > 1: the orbit spirals out. "
              "Structure-preserving methods keep det = 1 and stay on the exact circle's scale.",
     equations=(r"H(q,p,t) = \tfrac12 e^{-\lambda t}\,(p^2+q^2)",
                (r"\dot q = e^{-\lambda t} p,\quad \dot p = -e^{-\lambda t} q,\quad "
