@@ -152,8 +152,8 @@ def _gauges(scene):
         (f"{scene.summary} Printed parameters: h = {scene.h:g}, T = {scene.T:g}, the paper's Euler-type scheme in "
         "each gauge (per-gauge runs). Positions and mechanical momenta Π = p − eA agree across gauges up to the "
         "method's error; the canonical momenta p differ by e ∇χ, as they must."),
-        ("Corrections: each gauge is built here from its gauge function χ (A' = A + ∇χ, φ' = φ − ∂_t χ), not "
-        "transcribed from the paper's printed Hamiltonians:"),
+        ("Corrections: each gauge (original, Coulomb, symmetric, Landau, Lorenz) is built here from its gauge "
+        "function χ (A' = A + ∇χ, φ' = φ − ∂_t χ), not transcribed from the paper's printed Hamiltonians:"),
         *scene.notes,
     ]
     items = []
