@@ -212,7 +212,7 @@ class App(param.Parameterized):
         self._next_ahead()
 
     def _ahead_work(self):
-        """The steps of building ahead, 0.1-0.2 s each, per feature with `ahead`: its layout built,
+        """The steps of building ahead, 0.1-0.3 s each, per feature with `ahead`: its layout built,
         its layout joining the page (unless its tab was shown meanwhile), then its view's own steps
         (`FeatureView.ahead`: the data at hand drawn)."""
         for i, f in enumerate(FEATURES):

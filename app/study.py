@@ -36,6 +36,13 @@ from .warmup import first_view
 LIVE_MAX_STEPS = 2_000_000
 QUICK_S = 0.03  # a comparison expected to take at most this long is computed in the change's handler
 SECONDS_PER_STEP = {}  # (scene, method, other) -> what its last comparison in this server took per step
+LIVE_REFERENCE_STEPS = 200_000  # a fine rk8 reference for the final error takes at most this many steps (~0.1 s)
+CLOUD_POINTS = {True: 32, False: 64}
+DELTA = 1e-4
+# A comparison peaks at 20-28 bytes per value its runs record (charged 20; 28-39 before compare ran on
+# the fused driver, which forms no array of tangent maps; tracemalloc, tests/test_app_state.py checks
+# that the lease is at least the peak and at most twice it).
+BYTES_PER_RECORDED = 40
 
 
 def expected_quick(rate, h, T):
@@ -45,13 +52,6 @@ def expected_quick(rate, h, T):
         return rate is not None and rate * check_step(h, T) <= QUICK_S
     except InputError:
         return False
-LIVE_REFERENCE_STEPS = 200_000  # a fine rk8 reference for the final error takes at most this many steps (~0.1 s)
-CLOUD_POINTS = {True: 32, False: 64}
-DELTA = 1e-4
-# A comparison peaks at 20-28 bytes per value its runs record (charged 20; 28-39 before compare ran on
-# the fused driver, which forms no array of tangent maps; tracemalloc, tests/test_app_state.py checks
-# that the lease is at least the peak and at most twice it).
-BYTES_PER_RECORDED = 40
 
 
 def comparison_bytes(setups, h, T):

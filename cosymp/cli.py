@@ -245,7 +245,7 @@ def _report(args, out, err):
         h = scene.h if args.h is None else args.h
         T = scene.T if args.T is None else args.T
         check_reference(setups[0], check_step(h, T) * h)
-        keys = warm.unit_keys(scene.name, [s.method.name for s in setups] + ["exact" if scene.has_flow else "rk8"])
+        keys = warm.run_keys(scene, [s.method.name for s in setups])
     _compile_first(keys, err)
     with shown(err) as progress:
         if args.target == "paper":

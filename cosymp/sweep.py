@@ -137,9 +137,7 @@ class Plan:
     def unit_keys(self):
         """The keys of the kernel units (cosymp.warm) its points need: the method's, and the
         reference's for error_final (the exact flow, else rk8)."""
-        scene = get_scene(self.scene)
-        ref = ["exact" if scene.has_flow else "rk8"] if "error_final" in self.measures else []
-        return warm.unit_keys(self.scene, [self.method, *ref])
+        return warm.run_keys(get_scene(self.scene), [self.method], reference="error_final" in self.measures)
 
     def step_counts(self):
         """(steps of each (h, T) pair of the grid, how many points share each pair): from the h and

@@ -110,6 +110,12 @@ def unit_keys(scene, methods):
     return [COMMON] + list(dict.fromkeys(f"{scene}/{type(METHODS[m].data()).__name__}" for m in methods))
 
 
+def run_keys(scene, methods, reference=True):
+    """unit_keys of runs of these methods (names) on the scene (a Scene) and, with `reference`, of
+    the reference they are measured against: the exact flow where the scene has one, else rk8."""
+    return unit_keys(scene.name, [*methods, *(["exact" if scene.has_flow else "rk8"] if reference else [])])
+
+
 def units():
     """The common unit, then one unit per (scene, family), in registry order."""
     from .scenes import SCENES

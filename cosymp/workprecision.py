@@ -79,13 +79,6 @@ def _setups(scene, methods, values, theta):
                    for m in dict.fromkeys(names)]
 
 
-def unit_keys(setups):
-    """The keys of the kernel units (cosymp.warm) that runs of these setups of one scene and their
-    reference (the exact flow, else rk8 and scipy's solvers) need."""
-    scene = setups[0].scene
-    return warm.unit_keys(scene.name, [s.method.name for s in setups] + ["exact" if scene.has_flow else "rk8"])
-
-
 def check_horizon(T):
     """T as a float, or InputError saying what to change."""
     if not isinstance(T, (int, float)) or not math.isfinite(T) or T <= 0:
@@ -238,7 +231,7 @@ def measure(scene, methods=None, values=None, T=None, hs=None, theta=None, peers
     progress(done, total, label) is called before each run; total counts methods and peers.
     partial(rows), if given, is called with a copy of the rows so far after each run.
     The input is checked before the first progress report; prepare(keys), if given, is called
-    then, before any run, with the keys of the kernel units the runs need (`unit_keys`): the
+    then, before any run, with the keys of the kernel units the runs and their reference need (`warm.run_keys`): the
     command line compiles the missing ones there.
     """
     scene, setups = _setups(scene, methods, values, theta)
@@ -254,7 +247,7 @@ def measure(scene, methods=None, values=None, T=None, hs=None, theta=None, peers
     if not scene.has_flow:
         reference_steps(scene, T)
     if prepare is not None:
-        prepare(unit_keys(setups))
+        prepare(warm.run_keys(scene, [s.method.name for s in setups]))
     solvers = [solver_name(s) for s in setups] + (list(PEERS) if peers else [])
     total = len(solvers)
     report = progress or (lambda done, total, label: None)
@@ -307,7 +300,7 @@ def drift(scene, methods=DRIFT_METHODS, values=None, h=None, horizons=None, thet
         raise InputError(f"T = {horizons[-1]:g} takes {counts[-1]:.3g} steps of h = {h:g}, over this study's "
                          f"{DRIFT_MAX_STEPS:.0e}: increase h or shorten the horizons")
     if prepare is not None:
-        prepare(unit_keys(setups))
+        prepare(warm.run_keys(scene, [s.method.name for s in setups]))
     total = len(setups) + (0 if scene.has_flow else 1)
     report = progress or (lambda done, total, label: None)
     refs, unc, label, ref_failure = _drift_reference(setups[0], h, counts, report, total)

@@ -17,8 +17,8 @@ SYMPLECTIC_TEXT = ("<h4>Symplectic form</h4><p class='doc'>The paper's estimator
                    "the one-step increments of two nearby runs. Rigorous checks: max |M<sub>k</sub>ᵀ J "
                    "M<sub>k</sub> − J| of the one-step tangent map (0 to round-off when symplectic), "
                    "ω(δ¹, δ²)/δ² of the separations δ<sup>i</sup> = z<sup>i</sup> − z<sup>0</sup> of "
-                   "two nearby runs started δ = 1e-4 away along q₁ and along p₁, and the area enclosed by a carried loop of initial states "
-                   "(radius 0.05): both stay 1 for a symplectic method while the flow keeps them small, and "
+                   "two nearby runs started δ = 1e-4 away along q₁ and along p₁, and the area enclosed "
+                   "by a carried loop of initial states (radius 0.05): both stay 1 for a symplectic method while the flow keeps them small, and "
                    "drift for every method once it stretches them past its linear range (kapitza's "
                    "fast-driven pendulum), where only the tangent-map checks still tell the methods "
                    "apart.</p>")

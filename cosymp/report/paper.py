@@ -153,17 +153,18 @@ def drift_against_band(env, T):
     def reach(e):
         return np.maximum(np.abs(e["H_min"]), np.abs(e["H_max"]))
 
-    if SCHEME not in env or REFERENCE not in env or not len(env[REFERENCE]["t"]) or not len(env[SCHEME]["t"]):
+    if not (len(env[SCHEME]["t"]) and len(env[REFERENCE]["t"])):  # a run that stopped at once
         return ""
     band = float(np.nanmax(reach(env[SCHEME])))
     drift = reach(env[REFERENCE])
     out = np.flatnonzero(drift > band)
     if len(out):
-        return (f"RK4's |H + p_t| leaves the symplectic scheme's band (±{band:.2g}) near t = {env[REFERENCE]['t'][out[0]]:.3g} "
-                f"and reaches {drift[-1]:.2g} at T.")
-    return (f"At T = {T:g}, RK4's |H + p_t| ({drift[-1]:.2g}) is still inside the symplectic scheme's band (±{band:.2g}): "
-            f"at its average rate so far it would leave the band near t = {T * band / drift[-1]:.2g}, while the band does "
-            "not grow.")
+        return (f"RK4's |H + p_t| leaves the symplectic scheme's band (±{band:.2g}) near "
+                f"t = {env[REFERENCE]['t'][out[0]]:.3g} and reaches {drift[-1]:.2g} at T.")
+    rate = (f": at its average rate so far it would leave the band near t = {T * band / drift[-1]:.2g}, while the "
+            "band does not grow." if drift[-1] > 0 else ".")
+    return (f"At T = {T:g}, RK4's |H + p_t| ({drift[-1]:.2g}) is still inside the symplectic scheme's band "
+            f"(±{band:.2g}){rate}")
 
 
 def _gauges(scene):
