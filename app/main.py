@@ -7,7 +7,6 @@ BokehJS come from Panel's and Bokeh's bundled resources.
 import contextlib
 import html
 import io
-import time
 from pathlib import Path
 from urllib.parse import parse_qsl, urlencode
 
@@ -19,7 +18,7 @@ from cosymp.errors import InputError, RunError
 from .features import FEATURES
 from .jobs import Job, Note
 from .memory import log_when_freed, map_large_blocks
-from .page import SCRIPTS, Design, adjust_panel, serve_locally
+from .page import SCRIPTS, Activity, Design, Spares, adjust_panel, serve_locally
 from .plotting import katex_fonts_css, push, rule
 from .presets import URL_NAMES, parse_items, query_items
 from .study import Controls, PresetLinks, SceneInfo, Study, study_report
@@ -47,10 +46,6 @@ if (!(navigator.clipboard && window.isSecureContext)) {
 class App(param.Parameterized):
     """One session: the study (first computed from the link's settings), each feature's state and
     view, the URL and the notifications."""
-
-    # time.monotonic() of the last change in any page of this server: tabs are built ahead (_ahead)
-    # only when the whole server has been idle, so that pages being used never wait for that work
-    last_change = 0.0
 
     def __init__(self, **params):
         super().__init__(**params)
@@ -94,10 +89,10 @@ class App(param.Parameterized):
         for f in FEATURES:
             if f.url:
                 self.states[f.name].param.watch(lambda e: self._write_url(), list(f.url))
-        self._touch()
+        Activity.touch()
         self._ahead_done = set()
         self._ahead_steps = self._ahead_work()
-        self.study.param.watch(self._touch, [*Study.INPUTS, "view"])
+        self.study.param.watch(Activity.touch, [*Study.INPUTS, "view"])
         pn.state.onload(self._flush)
         pn.state.on_session_destroyed(self._stop)
 
@@ -170,12 +165,13 @@ class App(param.Parameterized):
         counts as a change: no page builds ahead from its request until a second after it is drawn
         (its document was fetched and drawn while closed pages built theirs: 2.1-3.7 s to the
         first plot over four page loads in a row, against 1.4 s for the first)."""
-        self._touch()
+        Activity.touch()
         self._write_url()
         for note in self._pending:
             self._notify(note.level, note.text)
         self._next_ahead()
         if self._doc is not None and self._doc.session_context is not None:
+            Spares.fill()
             self._gone = False
             self._watcher = self._doc.add_periodic_callback(self._watch, GONE_MS)
 
@@ -191,9 +187,6 @@ class App(param.Parameterized):
             self._stop(None)
         self._gone = gone
 
-    def _touch(self, *events):
-        App.last_change = time.monotonic()
-
     def _ahead(self):
         """Build the tabs ahead of their first showing, hidden, while the server is idle (no change
         in any page for AHEAD_IDLE_S, nothing computing in this one): a first visit then shows it at
@@ -204,7 +197,7 @@ class App(param.Parameterized):
         if self._stopped or self._closed():
             return
         busy = any(j.running for j in self.jobs)
-        if not busy and time.monotonic() - App.last_change >= AHEAD_IDLE_S:
+        if not busy and Activity.idle(AHEAD_IDLE_S):
             step = next(self._ahead_steps, None)
             if step is None:
                 return

@@ -3,13 +3,18 @@
 Each adjustment names what it saves; tests/test_app_main.py fails when a Panel or Bokeh release
 changes what one relies on.
 """
+import asyncio
 import contextlib
+import contextvars
 import functools
+import logging
+import time
 from typing import ClassVar
 
 import panel as pn
 from bokeh.resources import Resources
-from panel.io import document
+from bokeh.util.token import generate_jwt_token, generate_session_id
+from panel.io import document, server
 from panel.io.document import unlocked
 from panel.io.resources import LOCAL_DIST
 from panel.io.state import set_curdoc
@@ -123,13 +128,119 @@ def _seen_if_closed(future):
         future._log_traceback = False
 
 
+class Activity:
+    """When a page of this server last changed (time.monotonic()). Work done ahead (the tabs built
+    hidden, a spare session) waits until every page has been idle a while, so that pages in use
+    never wait for it. Held here, in an imported module: main.py runs anew for each page, so a class
+    of it saw that page's changes only."""
+
+    last = 0.0
+
+    @classmethod
+    def touch(cls, *events):
+        cls.last = time.monotonic()
+
+    @classmethod
+    def idle(cls, seconds):
+        return time.monotonic() - cls.last >= seconds
+
+
+# Logged under Panel's logger (PANEL_LOG_LEVEL=info shows it beside Panel's session lines).
+LOG = logging.getLogger("panel.cosymp")
+SPARE_BUILT = "cosymp: spare session %s built in %.2f s"
+SPARE_HANDED = "cosymp: a page got spare session %s"
+
+
+class Spares:
+    """Sessions of the app's first view, built while the server is idle, before their page is asked
+    for: a page asked for without settings (`/app`) gets one, so that its document is ready when its
+    browser connects. Panel's warm `reuse_sessions` (app/warmup.py) builds a page's session while the
+    browser loads the page's scripts, on the server's one thread: the page's 25 static files waited
+    for the build (0.5-0.7 s), and the document for them (first plot 1.8-2.0 s after the request,
+    1.35-1.45 s with a spare). A page with settings in its link gets its own session, built as
+    before (what the link asks for is applied while it is built).
+
+    One spare per app path, once a page without settings has been asked for there. The next is built
+    after a page has loaded (`fill`, from the page's onload) and the server has then been idle
+    IDLE_S: a build takes the server 0.35-0.6 s, which a change made meanwhile waits for. A spare is
+    kept from the server's check for unused sessions until it is handed out, and HANDED_S after that
+    (its browser connects within a second or two; one that never does is then discarded as any
+    page's session)."""
+
+    IDLE_S = 2.0
+    HANDED_S = 60.0
+    wanted: ClassVar[dict] = {}  # (application context, path) -> (request, application) to build a spare with
+    ready: ClassVar[dict] = {}  # (application context, path) -> id of a built session
+    building: ClassVar[set] = set()
+    _asking = contextvars.ContextVar("cosymp_spare_asking", default=None)
+
+    @classmethod
+    def serve(cls, get):
+        """Panel's handler of a page's request: a page without settings may get a spare, and asks for
+        one to be there for the next such page. A request counts as a change (Activity)."""
+
+        @functools.wraps(get)
+        async def handled(self, *args, **kwargs):
+            Activity.touch()
+            key = (self.application_context, self.request.path) if not self.request.query_arguments else None
+            asking = cls._asking.set(key)
+            try:
+                await get(self, *args, **kwargs)
+            finally:
+                cls._asking.reset(asking)
+            if key is not None:
+                cls.wanted.setdefault(key, (self.request, self.application))
+
+        handled.cosymp = True
+        return handled
+
+    @classmethod
+    def session_id(cls, secret_key=None, signed=False):
+        """The id Panel gives a page whose session it builds while the page loads: a spare's, when
+        the page asked for none of the settings and a spare is ready (building it then finds it
+        built)."""
+        key = cls._asking.get()
+        spare = cls.ready.pop(key, None) if key is not None else None
+        session = key[0]._sessions.get(spare) if spare is not None else None
+        if session is None:
+            return generate_session_id(secret_key=secret_key, signed=signed)
+        asyncio.get_running_loop().call_later(cls.HANDED_S, session.unblock_expiration)
+        LOG.info(SPARE_HANDED, spare)
+        return spare
+
+    @classmethod
+    def fill(cls):
+        """A page has loaded: build the spares that are wanted and missing, once the server is idle."""
+        for key in set(cls.wanted) - set(cls.ready) - cls.building:
+            cls.building.add(key)
+            asyncio.ensure_future(cls._build(key, *cls.wanted[key]))
+
+    @classmethod
+    async def _build(cls, key, request, app):
+        context, _ = key
+        try:
+            while not Activity.idle(cls.IDLE_S):
+                await asyncio.sleep(0.25)
+            start = time.monotonic()
+            spare = generate_session_id(secret_key=app.secret_key, signed=app.sign_sessions)
+            token = generate_jwt_token(spare, secret_key=app.secret_key, signed=app.sign_sessions,
+                                       expiration=app.session_token_expiration,
+                                       extra_payload={"headers": {}, "cookies": {}, "arguments": {}})
+            session = await context.create_session_if_needed(spare, request, token)
+            session.block_expiration()
+            cls.ready[key] = spare
+            LOG.info(SPARE_BUILT, spare, time.monotonic() - start)
+        finally:
+            cls.building.discard(key)
+
+
 def adjust_panel():
     """Panel's handling of the page's events, for this server process (once; each page runs main.py):
     a change is handled at once, not 50 ms later (Panel waits that long for more changes of the same
     widget to merge; each computation here merges the changes made while it runs), and what it
     causes reaches the page in one message. Pages load only the BokehJS bundles they use, no
-    queued message waits for the next change to be sent, and a page that closes while being
-    written to leaves no traceback in the log."""
+    queued message waits for the next change to be sent, a page that closes while being
+    written to leaves no traceback in the log, and a page without settings gets a spare session."""
     Resources._default_components = BOKEH_BUNDLES
     Syncable._debounce = 0
     if not getattr(Syncable._change_event, "cosymp", False):
@@ -138,6 +249,9 @@ def adjust_panel():
         document._dispatch_msgs = no_stranded_messages(document._dispatch_msgs)
     if not getattr(WebSocketHandler.write_message, "cosymp", False):
         WebSocketHandler.write_message = closed_writes_seen(WebSocketHandler.write_message)
+    if not getattr(server.DocHandler.get, "cosymp", False):
+        server.DocHandler.get = Spares.serve(server.DocHandler.get)
+        server.generate_session_id = Spares.session_id
 
 
 def serve_locally():

@@ -75,10 +75,11 @@ def setup(scene, method, theta=None, **values):
 
 @pytest.fixture(scope="session")
 def server():
-    """`panel serve app --setup app/warmup.py` on a free port; yields its base URL."""
+    """`panel serve app --setup app/warmup.py` on a free port, logging at info level (the app's
+    spare sessions say when they are built and handed out); yields its base URL."""
     from served import ARTIFACTS, served
 
-    with served(ARTIFACTS / "server.log") as (url, _):
+    with served(ARTIFACTS / "server.log", {"PANEL_LOG_LEVEL": "info", "PYTHONUNBUFFERED": "1"}) as (url, _):
         yield url
 
 

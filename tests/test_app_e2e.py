@@ -58,6 +58,43 @@ def test_opens_on_the_first_view_and_a_slider_updates_the_plots(page):
     page.check()
 
 
+def test_a_page_without_settings_gets_a_session_built_before_it_was_asked_for(page):
+    """app/page.Spares: once a page without settings has loaded and the server has been idle, a
+    session of the first view is built (the server's log says so); the next page without settings
+    gets it, and works as any page (the first view drawn, its URL written, a scene change); a link
+    with settings gets a session of its own, built with them. (Twice at first: the server's very
+    first page is asked for before the app has adjusted Panel, and asks for no spare.)"""
+    log = ARTIFACTS / "server.log"
+    built = re.compile(r"cosymp: spare session (\S+) built")
+    page.open()
+    page.open()
+    deadline = time.monotonic() + 60
+    while True:
+        spares = built.findall(log.read_text())
+        handed = set(re.findall(r"cosymp: a page got spare session (\S+)", log.read_text()))
+        waiting = [s for s in spares if s not in handed]
+        if waiting:
+            break
+        assert time.monotonic() < deadline, "no spare session was built within 60 s of a page's load"
+        page.page.wait_for_timeout(250)
+    page.open()
+    assert f"cosymp: a page got spare session {waiting[-1]}" in log.read_text()
+    page.page.wait_for_selector(TABLE_ROW)
+    assert page.page.locator("h2:visible").first.inner_text() == SCENES["modulated"].title
+    page.page.wait_for_function("() => window.location.search.includes('scene=modulated')")
+    before = page.numbers()
+    page.page.locator("select").first.select_option(label=SCENES["damped"].title)
+    page.wait_for_numbers_change(before)
+    expect(page.page.locator("h2:visible").first).to_contain_text("Damped oscillator")
+    page.check()
+    count = log.read_text().count("cosymp: a page got spare session")
+    page.open(query(scene="charged"))
+    page.page.wait_for_selector(TABLE_ROW)
+    assert SCENES["charged"].title in page.page.locator("h2:visible").first.inner_text()
+    assert log.read_text().count("cosymp: a page got spare session") == count
+    page.check()
+
+
 def test_switching_scenes_rebuilds_controls_and_plots(page):
     page.open(query(scene="damped"))
     page.page.locator("select").first.select_option(label=SCENES["charged"].title)

@@ -1,4 +1,6 @@
 """The served page (app/main.py) composed in-process, without a server or a browser."""
+import asyncio
+import inspect
 import pathlib
 import types
 
@@ -411,16 +413,16 @@ def test_tabs_are_built_ahead_one_at_a_time_while_the_page_is_idle_and_start_no_
     names = [f.name for f in FEATURES]
     app._ahead()
     assert not app._ahead_done, "not idle yet"
-    main.App.last_change -= main.AHEAD_IDLE_S
+    page.Activity.last -= main.AHEAD_IDLE_S
     other = main.App()
     app._ahead()
     assert not app._ahead_done, "another page has just been opened"
     other._stop(None)
-    main.App.last_change -= main.AHEAD_IDLE_S
+    page.Activity.last -= main.AHEAD_IDLE_S
     gone = main.App()
     gone._doc = types.SimpleNamespace(session_context=types.SimpleNamespace(session=types.SimpleNamespace(
         connection_count=0)))
-    main.App.last_change -= main.AHEAD_IDLE_S
+    page.Activity.last -= main.AHEAD_IDLE_S
     gone._ahead()
     assert not gone._ahead_done, "a page whose browser has gone builds nothing ahead (its session lingers)"
     gone._stop(None)
@@ -533,3 +535,45 @@ def test_a_scene_change_drops_another_scenes_long_run_and_map_and_the_shown_tab_
     app.study.view = "map"
     assert app.states["map"].result.plan.scene == "damped"
     app._stop(None)
+
+
+def test_a_page_without_settings_gets_the_spare_session_and_a_link_with_settings_its_own(monkeypatch):
+    """page.Spares.session_id, which Panel's handler of a page's request calls (once page.adjust_panel
+    has run) for the id of the session it builds while the page loads: the spare's for a request
+    without settings (its build then finds it built), kept from the check for unused sessions until
+    HANDED_S after; a new id for a link with settings, or when the spare was discarded meanwhile.
+    The served flow, from the spare's build to its page, is test_app_e2e's."""
+    from panel.io import server
+
+    assert server.generate_session_id == page.Spares.session_id and server.DocHandler.get.cosymp
+    source = inspect.getsource(server.DocHandler.get.__wrapped__)
+    assert "generate_session_id(" in source and "create_session_if_needed" in source, \
+        "Panel's warm sessions no longer work this way: revisit app/page.Spares"
+    monkeypatch.setattr(page.Spares, "HANDED_S", 0.05)
+    monkeypatch.setattr(page.Spares, "ready", {})
+    unblocked = []
+    spare = types.SimpleNamespace(unblock_expiration=lambda: unblocked.append("spare"))
+    context = type("Context", (), {"_sessions": {"spare-id": spare}})()
+    plain = (context, "/app")
+
+    async def ask(key):
+        asking = page.Spares._asking.set(key)
+        try:
+            return page.Spares.session_id()
+        finally:
+            page.Spares._asking.reset(asking)
+
+    async def scenario():
+        page.Spares.ready[plain] = "spare-id"
+        with_settings = await ask(None)
+        assert with_settings != "spare-id" and page.Spares.ready == {plain: "spare-id"}
+        assert await ask(plain) == "spare-id" and page.Spares.ready == {}
+        assert unblocked == [], "kept until its browser has had time to connect"
+        again = await ask(plain)
+        assert again not in ("spare-id", with_settings), "one page per spare"
+        await asyncio.sleep(0.1)
+        assert unblocked == ["spare"]
+        page.Spares.ready[plain] = "discarded-id"
+        assert await ask(plain) != "discarded-id"
+
+    asyncio.run(scenario())
