@@ -1,5 +1,7 @@
-"""Play: the comparison animated. The orbit is traced up to the current frame (the whole orbit
-faint beneath), the carried loop moves, and a cursor marks the time on H~ and on the loop's area.
+"""Play: the comparison animated. The orbit is traced up to the current frame (both methods' whole
+orbits beneath in light grey, the same for both: in the methods' colours, A's many overlapping
+revolutions built up into what looked like an orbit already traced, and B's dashes were lost), the
+carried loop moves, and a cursor marks the time on H~ and on the loop's area.
 A new frame sends only the traced part, the loop and the cursors' positions."""
 import numpy as np
 import panel as pn
@@ -10,6 +12,8 @@ from .base import Feature, FeatureView
 from .cloud import closed
 from .common import color_key, comparisons, names, phase_axes, zcols
 from .structure import time_plots, update_plots
+
+FAINT = "#dee2e6"  # the whole orbits beneath the traced part
 
 TRACE_POINTS = 2000
 
@@ -45,7 +49,7 @@ class PlayView(FeatureView):
         self.orbit_fig = figure("orbit, traced (dot: now)", "q", "p")
         self.faint = Pair(self.orbit_fig, width=1)
         for line in self.faint.lines.values():
-            line.glyph.line_alpha = 0.2
+            line.glyph.update(line_color=FAINT, line_alpha=0.6, line_dash="solid")
         self.trace = Pair(self.orbit_fig, width=2)
         self.now = Pair(self.orbit_fig, width=0, start=True)
         self.loop = Pair(figure("loop of initial states, now", "q1", "p1"), width=2)
@@ -88,7 +92,7 @@ class PlayView(FeatureView):
             self._scene = runs.scene
         i, j = phase_axes(runs.scene)[0][:2]
         self.orbits = {slot: zcols(c.run, i, j) for slot, c in comparisons(runs).items()}
-        for p in (self.faint, self.trace, self.now, self.loop):
+        for p in (self.trace, self.now, self.loop):
             p.colors(names(runs))
         self.faint.set({slot: path(*xy) for slot, xy in self.orbits.items()})
         update_plots(self.plots, runs)
