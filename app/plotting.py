@@ -32,7 +32,7 @@ from bokeh.plotting import figure as bokeh_figure
 from panel.io.document import unlocked
 
 from cosymp.report.style import pair_colors
-from cosymp.series import envelope, thin
+from cosymp.series import FLOOR, envelope, thin, zero_floor
 
 SLOTS = ("A", "B")
 A_ALPHA = 0.7  # A is drawn over B, slightly transparent so B shows where they cross
@@ -41,7 +41,6 @@ POINTS = 1200  # a long series is reduced to this many points (per-bin minima an
 PATH_POINTS = 4000  # a phase portrait keeps this many points in order
 DENSE = 100_000  # a portrait of more recorded states is rasterized
 RASTER = (480, 360)
-FLOOR = 1e-17  # exact zeros of a deviation are drawn here on log axes
 TOOLS = "pan,wheel_zoom,box_zoom,reset,save"
 ASSETS = Path(__file__).resolve().parent.parent / "assets"
 
@@ -243,14 +242,6 @@ def series(x, y, logy=False, floor=FLOOR):
     absolute value, exact zeros at `floor`."""
     x, y = envelope(x, finite(np.abs(y) if logy else y), POINTS)
     return x, (np.where(y == 0, floor, y) if logy else y)
-
-
-def zero_floor(ys):
-    """Where exact zeros are drawn on a log axis among these series: FLOOR, or a decade below their
-    smallest nonzero value when that is smaller (charged's paper volume estimator is 8e-45 for RK4
-    and exactly 0 for midpoint: at FLOOR the zero was drawn above the data, and the data not at all)."""
-    small = [np.min(a[a > 0]) for a in (np.abs(finite(y)) for y in ys) if np.any(a > 0)]
-    return min([FLOOR] + [v / 10 for v in small])
 
 
 def peaks(x, y):

@@ -53,8 +53,8 @@ Playwright round trips do not enter the numbers):
 * Before each input the page must be quiet (no counted event for 600 ms after the last paint, no
   view building), else the measurement is reported as not quiet.
 
-Actions: a fresh page at the app's own first view (navigation to first plot drawn / settled), then
-on a page opened at ?scene=damped: the scene changed to each scene and back to damped, the method
+Actions: fresh pages at the app's own first view (navigation to first plot drawn / settled; on a
+server this run started, its very first page apart: see run_first_page), then on a page opened at ?scene=damped: the scene changed to each scene and back to damped, the method
 changed (midpoint -> gauss4 -> symplectic-euler -> midpoint), the gamma slider dragged (first move
 to first change, last move to settled), θ moved by 20 ArrowRight presses with the Lifted theta-
 method (first press to first change, last press to settled); the first visit of each tab on a fresh
@@ -587,7 +587,15 @@ def start_long_run(page, timeout_s=60):
     raise RuntimeError("the long run neither started by itself nor offered an enabled Start button")
 
 
-def run_first_page(browser, url, repeats, record):
+def run_first_page(browser, url, repeats, record, fresh=False):
+    """Fresh pages at the first view, one at a time. On a server this run started (fresh), its very
+    first page is timed apart: Panel builds, in that page's request, the session it writes every
+    later page's HTML from (1.5-2 s more), and the app's spare sessions (app/page.Spares) start
+    with the next page."""
+    if fresh:
+        context, _, load = open_page(browser, url)
+        record("server's first page", "", 0, load)
+        context.close()
     for r in range(repeats):
         context, _, load = open_page(browser, url)
         record("first page", "", r, load)
@@ -856,7 +864,9 @@ def main():
         browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
         stack.callback(browser.close)
         parts = set(args.only or PARTS) - ({"load"} if args.skip_load else set())
-        for part, run in (("first", run_first_page), ("interactions", run_interactions), ("tabs", run_tabs)):
+        if "first" in parts:
+            run_first_page(browser, url, args.repeats, record, fresh=not args.url)
+        for part, run in (("interactions", run_interactions), ("tabs", run_tabs)):
             if part in parts:
                 run(browser, url, args.repeats, record)
         if "load" in parts:

@@ -3,6 +3,21 @@ import math
 
 import numpy as np
 
+FLOOR = 1e-17  # exact zeros of a deviation are drawn here on log axes
+
+
+def zero_floor(ys):
+    """Where exact zeros are drawn on a log axis among these series: FLOOR, or a decade below their
+    smallest nonzero value when that is smaller (charged's paper volume estimator is 8e-45 for RK4
+    and exactly 0 for midpoint: at FLOOR the zero was drawn above the data, and the data not at all)."""
+    small = []
+    for y in ys:
+        a = np.abs(np.asarray(y, float))
+        a = a[np.isfinite(a) & (a > 0)]
+        if a.size:
+            small.append(np.min(a))
+    return min([FLOOR] + [v / 10 for v in small])
+
 
 def envelope(x, y, max_points):
     """(x, y) reduced to at most max_points: per bin of consecutive points the minimum and the

@@ -41,7 +41,10 @@ class Figure:
     """A plot of series against a shared x axis (series may have their own x values). A
     parametric figure (a phase portrait) draws each series in its own order instead. The series
     are drawn last to first, so that the first is on top (the first method over the second, as the
-    app draws them); the legend lists them in order."""
+    app draws them); the legend lists them in order. With `zeros`, exact zeros on a log y axis are
+    drawn at series.zero_floor (as in the app), and the caption says where; else they are left out
+    (a structure-preserving method's exact zeros left its curve out of the figure the contrast is
+    about)."""
 
     title: str
     xlabel: str
@@ -51,6 +54,7 @@ class Figure:
     logy: bool = False
     caption: str = ""
     parametric: bool = False
+    zeros: bool = False
 
 
 @dataclass
@@ -102,10 +106,26 @@ def _array(values):
     return "[" + ",".join(text.tolist()) + "]"
 
 
+def floor(fig):
+    """Where the figure draws exact zeros (None: nowhere)."""
+    if not (fig.zeros and fig.logy and any(np.any(np.asarray(s.y, float) == 0) for s in fig.series)):
+        return None
+    return series.zero_floor([s.y for s in fig.series])
+
+
+def caption(fig):
+    """The figure's caption, saying where its exact zeros are drawn."""
+    at = floor(fig)
+    return fig.caption if at is None else f"{fig.caption} Exact zeros are drawn at {at:.0e}.".strip()
+
+
 def _figure_json(fig, key):
     series = []
+    at = floor(fig)
     for i, s in enumerate(fig.series):
         x, y = thin(s.x, s.y) if fig.parametric else envelope(s.x, s.y)
+        if at is not None:
+            y = np.where(y == 0, at, y)
         y = np.where(np.isfinite(y) & ((y > 0) | (not fig.logy)), y, np.nan)
         ok = np.isfinite(x) & ((x > 0) | (not fig.logx))
         x, y = x[ok], y[ok]
@@ -150,7 +170,8 @@ def render(report):
             if isinstance(item, Figure):
                 key = f"fig{len(figures)}"
                 figures.append(_figure_json(item, key))
-                cap = f"<figcaption>{html.escape(item.caption)}</figcaption>" if item.caption else ""
+                text = caption(item)
+                cap = f"<figcaption>{html.escape(text)}</figcaption>" if text else ""
                 body.append(f'<figure><div class="plot" id="{key}"></div>{cap}</figure>')
             else:
                 head = "".join(f"<th>{html.escape(str(c))}</th>" for c in item.columns)

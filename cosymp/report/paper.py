@@ -103,9 +103,9 @@ def _oscillator(scene, long, progress):
         Figure("|det M_k − 1| and ||M_kᵀ J M_k − J|| (rigorous)", "t", "defect",
                [Series(f"{m} |det M − 1|", c.run.t[:-1], c.det_dev, color=method_color(m)) for m, c in runs]
                + [Series(f"{m} ||MᵀJM − J||", c.run.t[:-1], c.symp_dev, dash=True, color=method_color(m))
-                  for m, c in runs], logy=True,
-               caption="The one-step tangent maps on the time slice: round-off for the symplectic scheme, not for RK4 "
-                       "(exact zeros are not drawn on the log axis)."),
+                  for m, c in runs], logy=True, zeros=True,
+               caption="The one-step tangent maps on the time slice: round-off for the symplectic scheme, not for "
+                       "RK4."),
     ]
     if long:
         items += _long_figures(name, long_values, T_long, progress)
@@ -138,7 +138,7 @@ def _long_figures(name, values, T_long, progress):
                caption="Per-bin envelope of H + p_t: bounded for the symplectic scheme, drifting for RK4 (plus the "
                        "round-off of summing p_t over millions of steps). " + drift_against_band(env, T_long)),
         Figure(f"max |det M_k − 1| per bin over the long run ({where})", "t", "|det M_k − 1|",
-               [Series(m, e["t"], e["det"], color=method_color(m)) for m, e in env.items()], logy=True,
+               [Series(m, e["t"], e["det"], color=method_color(m)) for m, e in env.items()], logy=True, zeros=True,
                caption="The rigorous volume check over every step of the long run."),
     ]
     if failures:

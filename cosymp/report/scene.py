@@ -128,10 +128,9 @@ def against(runs):
 def _structure_figures(scene, runs):
     return [
         Figure("|det M_k − 1| of the one-step maps", "t", "|det M_k − 1|",
-               _series(runs, lambda c: (c.run.t[:-1], c.det_dev)), logy=True,
-               caption="Exact zeros are not drawn on the log axis."),
+               _series(runs, lambda c: (c.run.t[:-1], c.det_dev)), logy=True, zeros=True),
         Figure("||M_kᵀ J M_k − J|| of the one-step maps", "t", "symplecticity defect",
-               _series(runs, lambda c: (c.run.t[:-1], c.symp_dev)), logy=True),
+               _series(runs, lambda c: (c.run.t[:-1], c.symp_dev)), logy=True, zeros=True),
         Figure("The paper's symplectic-form estimator ω(X¹, X²)", "t", "ω(X¹, X²)",
                _series(runs, lambda c: (c.run.t[1:], c.paper_omega))),
         Figure(f"The paper's volume-form estimator {volume_name(scene)}", "t", "det",
