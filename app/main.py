@@ -28,7 +28,7 @@ ASSETS = Path(__file__).resolve().parent.parent / "assets"
 NOTIFY_MS = {"error": 8000, "warning": 6000, "info": 4000}
 AHEAD_MS = 100  # one step of building tabs ahead at most this often (App._ahead)
 AHEAD_IDLE_S = 1.0  # after the last change in any page of the server
-GONE_MS = 5000  # a page whose browser has gone this long stops (App._watch)
+GONE_MS = 1000  # a page whose browser has gone this long stops (App._watch)
 COPY_LINK_JS = """
 const label = 'Copy link to this view';
 const done = (text) => { source.label = text; setTimeout(() => { source.label = label; }, 2500); };
