@@ -46,6 +46,26 @@ def test_text_is_escaped_and_data_cannot_close_the_script():
     assert spec[0]["series"][0]["label"] == "</script><b>" and spec[0]["series"][0]["y"] == [1, None]
 
 
+def test_exact_zeros_on_a_log_axis_are_drawn_at_the_floor_and_said_only_where_asked():
+    """Figure.zeros: a structure-preserving method's exact zeros on a log axis are drawn at
+    series.zero_floor (a decade below the smallest nonzero value when that is below 1e-17) and the
+    caption says where; without it they are left out, and nothing is said."""
+    def drawn(zeros, ys):
+        fig = Figure("f", "t", "defect", [Series(k, [0, 1, 2], y) for k, y in ys.items()], logy=True,
+                     caption="Rigorous.", zeros=zeros)
+        page = render(Report("r", [], [Section("s", [], [fig])]))
+        data = re.search(r'<script id="figures" type="application/json">(.*?)</script>', page, re.DOTALL).group(1)
+        spec = json.loads(data.replace("<\\/", "</"))
+        return [s["y"] for s in spec[0]["series"]], re.search(r"<figcaption>(.*?)</figcaption>", page).group(1)
+
+    ys = {"midpoint": [0.0, 0.0, 2e-16], "rk4": [1e-8, 2e-8, 3e-8]}
+    assert drawn(True, ys) == ([[1e-17, 1e-17, 2e-16], [1e-8, 2e-8, 3e-8]],
+                               "Rigorous. Exact zeros are drawn at 1e-17.")
+    assert drawn(False, ys) == ([[None, None, 2e-16], [1e-8, 2e-8, 3e-8]], "Rigorous.")
+    assert drawn(True, {"a": [0.0, 3e-40, 1.0]})[0] == [[3e-41, 3e-40, 1.0]], "a decade below the smallest value"
+    assert drawn(True, {"a": [1e-9, 2e-9, 3e-9]})[1] == "Rigorous.", "no zero, nothing said"
+
+
 def open_offline(path, shot, interact=False, js=None):
     """Open a report from disk with the network blocked; returns (requests other than the file,
     console errors, plots drawn, and when asked the second plot's hover readout and its x range

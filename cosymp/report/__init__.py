@@ -113,15 +113,13 @@ def floor(fig):
     return series.zero_floor([s.y for s in fig.series])
 
 
-def caption(fig):
-    """The figure's caption, saying where its exact zeros are drawn."""
-    at = floor(fig)
+def caption(fig, at):
+    """The figure's caption, saying where its exact zeros are drawn (at, from `floor`)."""
     return fig.caption if at is None else f"{fig.caption} Exact zeros are drawn at {at:.0e}.".strip()
 
 
-def _figure_json(fig, key):
+def _figure_json(fig, key, at):
     series = []
-    at = floor(fig)
     for i, s in enumerate(fig.series):
         x, y = thin(s.x, s.y) if fig.parametric else envelope(s.x, s.y)
         if at is not None:
@@ -168,9 +166,9 @@ def render(report):
         body.append(f'<section><h2>{html.escape(sec.title)}</h2>{_paragraphs(sec.text)}')
         for item in sec.items:
             if isinstance(item, Figure):
-                key = f"fig{len(figures)}"
-                figures.append(_figure_json(item, key))
-                text = caption(item)
+                key, at = f"fig{len(figures)}", floor(item)
+                figures.append(_figure_json(item, key, at))
+                text = caption(item, at)
                 cap = f"<figcaption>{html.escape(text)}</figcaption>" if text else ""
                 body.append(f'<figure><div class="plot" id="{key}"></div>{cap}</figure>')
             else:
