@@ -27,7 +27,7 @@ from .dispatch import (
     step,
     work,
 )
-from .families import OK, OVERFLOW, START
+from .families import OK, OVERFLOW, START, pending
 from .stack import coef_table, matrices, vectors
 
 COMPLEX_STEP = 1e-50
@@ -54,17 +54,23 @@ def scaling_at(P, t):
 
 
 @njit(**INLINE)
-def _coefs(P, offsets, tk, tk1, h, tau, C, reuse):
+def _coefs(P, offsets, tk, tk1, h, tau, C, reuse, pending):
     """Time coefficients at the offsets of the step from tk to tk1, read at the scene's time
     shifted by tau. With `reuse`, the end of the last step (same scaling) is the start of this
-    one."""
+    one (computed or still pending). With `pending` (an interleaved family), each row is left
+    for the step to compute where it uses it (kernels.families.row): its time goes in the last
+    column, NaN marking a computed row."""
     u = len(offsets)
+    nc = ncoef(P)
     for j in range(u):
         if j == 0 and reuse:
-            for c in range(ncoef(P)):
+            for c in range(nc + 1):
                 C[0, c] = C[u - 1, c]
+        elif pending:
+            C[j, nc] = (tk1 if offsets[j] == 1.0 else tk + offsets[j] * h) - tau
         else:
             coef(P, (tk1 if offsets[j] == 1.0 else tk + offsets[j] * h) - tau, C, j)
+            C[j, nc] = np.nan
 
 
 @njit(**INLINE)
@@ -216,7 +222,7 @@ def _matrix_loop(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, s
     up = down = 1.0
     for k in range(nsteps):
         e, tau, up, down = _scale(P, t0 + k * h, scaled, prev, tau, up, down)
-        _coefs(P, D.offsets, t0 + k * h, t0 + (k + 1) * h, h, tau, C, can_reuse and k > 0 and e == prev)
+        _coefs(P, D.offsets, t0 + k * h, t0 + (k + 1) * h, h, tau, C, can_reuse and k > 0 and e == prev, False)
         prev = e
         tk = t0 + k * h - tau
         s = lmatrix(D, P, C, tk, h, M, Q, LW)
@@ -252,7 +258,8 @@ def _members_loop(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, 
     up = down = 1.0
     for k in range(nsteps):
         e, tau, up, down = _scale(P, t0 + k * h, scaled, prev, tau, up, down)
-        _coefs(P, D.offsets, t0 + k * h, t0 + (k + 1) * h, h, tau, C, can_reuse and k > 0 and e == prev)
+        _coefs(P, D.offsets, t0 + k * h, t0 + (k + 1) * h, h, tau, C, can_reuse and k > 0 and e == prev,
+               pending(D, P))
         prev = e
         tk = t0 + k * h - tau
         recording = (k + 1) % stride == 0 or k + 1 == nsteps
@@ -309,7 +316,7 @@ def tangent_matrix(D, P, h, T, Z, PT, M):
     Q = matrices(P, 1, 0.0)[0]
     for k in range(T.shape[0]):
         tau = scaling_at(P, T[k])[1]
-        _coefs(P, D.offsets, T[k], T[k] + h, h, tau, C, False)
+        _coefs(P, D.offsets, T[k], T[k] + h, h, tau, C, False, False)
         lmatrix(D, P, C, T[k] - tau, h, M[k], Q, LW)
     return OK, T.shape[0]
 
@@ -327,7 +334,7 @@ def tangent_complex(D, P, h, T, Z, PT, M):
     zs = vectors(P, 1, 0.0)[0]
     for k in range(Z.shape[0]):
         e, tau = scaling_at(P, T[k])
-        _coefs(P, D.offsets, T[k], T[k] + h, h, tau, C, False)
+        _coefs(P, D.offsets, T[k], T[k] + h, h, tau, C, False, False)
         for r in range(m):
             zs[r] = Z[k, r]
         up, down = _factors(e)

@@ -87,7 +87,9 @@ def stage_square(D, P, like):
 
 
 def coef_table(D, P):
-    """The stack table of time coefficients: one row per time offset of D (at most MAX_OFFSETS)."""
+    """The stack table of time coefficients: one row per time offset of D (at most MAX_OFFSETS),
+    and one more column: the row's time where the row is still to be computed, else NaN
+    (kernels.loops._coefs and row)."""
 
 
 @overload(vectors, jit_options=_IR_INLINE, inline="always", prefer_literal=True)
@@ -132,6 +134,6 @@ def _stage_square(D, P, like):
 
 @overload(coef_table, jit_options=_IR_INLINE, inline="always")
 def _coef_table(D, P):
-    nc = _scene(P).ncoef
+    cols = _scene(P).ncoef + 1
     rows = _count(D, "offsets", MAX_OFFSETS)
-    return lambda D, P: stack_array((rows, nc), 0.0)
+    return lambda D, P: stack_array((rows, cols), 0.0)

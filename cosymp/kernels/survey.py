@@ -57,7 +57,7 @@ from .dispatch import (
     step,
     work,
 )
-from .families import OK, START
+from .families import OK, START, pending, row
 from .loops import COMPLEX_STEP, _accept, _add, _coefs, _record_start, _rescale, _scale, coef_at, energy_at
 from .stack import _scene, coef_table, matrices, vectors
 
@@ -205,11 +205,12 @@ def grow(M, e, A, B, m, scale, exponent):
 
 
 @njit(**INLINE)
-def _energy_after(P, C, end, Ce, t, z):
+def _energy_after(D, P, C, end, Ce, t, z):
     """H of the new state z of a step, in the step's scaled coordinates (H is invariant under the
     scaling, see scenes.base.SceneKernel), with time t (shifted): from the step's own last
     coefficient row where the family has one at the step's end, else from a new row."""
     if end >= 0:
+        row(D, P, C, end)
         return energy(P, C, end, z)
     coef(P, t, Ce, 0)
     return energy(P, Ce, 0, z)
@@ -319,7 +320,8 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
     for k in range(nsteps):
         g = first + k
         e, tau, up, down = _scale(P, t0 + g * h, scaled, prev, tau, up, down)
-        _coefs(P, D.offsets, t0 + g * h, t0 + (g + 1) * h, h, tau, C, can_reuse and k > 0 and e == prev)
+        _coefs(P, D.offsets, t0 + g * h, t0 + (g + 1) * h, h, tau, C, can_reuse and k > 0 and e == prev,
+               pending(D, P))
         prev = e
         tk = t0 + g * h - tau
         mapped = every > 0 and k % every == 0
@@ -340,7 +342,7 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
             _rescale(z, n, e, down, up)
             status, dpt = step(D, P, C, tk, h, z, 0.0, W)
             if i == 0 and want & WANT_H:
-                hnew = _energy_after(P, C, end, Ce, t1 - tau, z)
+                hnew = _energy_after(D, P, C, end, Ce, t1 - tau, z)
             _rescale(z, n, e, up, down)
             sum_, comp = _add(S, Cc, i, dpt)
             status = _accept(status, i, z, old, sum_ + comp, Z, PT, rec, recording, Zrec, PTrec, dZrec, m)
