@@ -5,7 +5,7 @@ with it (a work-precision plot shows every method of a scene at once, with scipy
 tests/test_report.py checks the CIEDE2000 distance of every such pair against MIN_DISTANCE). The
 colours go by family: the non-preserving Runge-Kutta methods warm (red, orange, brown), the
 paper's lifted θ-methods blues, Gauss-Legendre greens, the midpoint compositions violets, the
-splittings what is left (yellow, olive, teal, pink, maroon); the exact flow near black, scipy's
+splittings what is left (yellow, olive, grey-green, pink, maroon, mauve); the exact flow near black, scipy's
 solvers black and greys. Each family also has its own marker (scipy's solvers are drawn dashed as
 well), so that two methods whose colours come closest still differ in shape. The two methods of
 the first view keep the classic pair: implicit midpoint blue, RK4 red. A method keeps its colour
@@ -16,8 +16,9 @@ from functools import cache
 METHOD_COLORS = {
     "midpoint": "#1864ab", "symplectic-euler": "#38c0c0", "theta": "#a898f8", "theta-naive": "#20a8f8",
     "gauss4": "#386000", "gauss6": "#00c030", "composition4": "#6800d8", "composition6": "#f008e0",
-    "boris": "#a09000", "euler": "#f88000", "rk4": "#e03131", "rk8": "#803000", "leapfrog": "#c8b000",
-    "yoshida4": "#008068", "yoshida6": "#f888a0", "blanes-moan4": "#881048", "blanes-moan6": "#886800",
+    "boris": "#a09000", "euler": "#f88000", "rk4": "#e03131", "rk8": "#803000", "leapfrog": "#c0b000",
+    "yoshida4": "#689070", "yoshida6": "#f890a8", "blanes-moan4": "#800030", "blanes-moan6": "#886810",
+    "mclachlan8": "#805888",
     "exact": "#212529", "scipy-RK45": "#6c6c6c", "scipy-DOP853": "#000000", "scipy-LSODA": "#b0b0b0",
 }
 MIN_DISTANCE = 21
@@ -25,7 +26,8 @@ MIN_DISTANCE = 21
 four pairs of the previous palette that read alike in a work-precision plot were 11 to 20.5 apart
 (gauss4 and boris, composition4 and blanes-moan6, rk4 and composition6, symplectic-euler and
 leapfrog); a search of the colours visible on white (L* 25 to 72) found no 19 that all keep more
-than about 23."""
+than about 23. With mclachlan8 no colour kept 21 from all the others: the splittings' six were
+searched again together (coordinate descent over that grid), moving the five older ones slightly."""
 OTHER = "#343a40"
 """The colour of a second curve whose method has the same colour as the first (drawn dashed)."""
 FAMILY_MARKERS = {"Explicit": "triangle", "Theta": "circle", "Gauss": "diamond", "Composition": "inverted_triangle",
