@@ -224,7 +224,7 @@ def best_of(calls, repeats):
 
 
 METHODS = ("euler", "rk4", "rk8", "midpoint", "composition4", "composition6", "leapfrog", "yoshida4",
-           "yoshida6", "blanes-moan4", "blanes-moan6")
+           "yoshida6", "blanes-moan4", "blanes-moan6", "mclachlan8")
 
 
 def main():
