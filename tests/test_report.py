@@ -142,6 +142,20 @@ def test_markers_are_drawn_in_a_parametric_plot(tmp_path):
     assert answers["js"] == {"a": [255, 0, 0], "b": [0, 0, 255]}
 
 
+def test_log_axes_label_whole_decades_as_the_app_does(tmp_path):
+    """0.001 to 10000 written out and 1e-4, 1e5 beyond, as the app's log ticks (app.plotting.LOG_TICKS):
+    the report wrote every decade as a power, 1e0 and 1e2 beside the app's 1 and 100."""
+    path = tmp_path / "decades.html"
+    x = [0.0, 1.0, 2.0, 3.0]
+    figures = [Figure("f", "t", "y", [Series("a", x, [1e-5, 1e-2, 1e1, 1e6])], logy=True),
+               Figure("g", "t", "y", [Series("a", x, [1e-2, 1e-1, 1e0, 1e4])], logy=True)]
+    path.write_text(render(Report("decades", [], [Section("s", [], figures)])))
+    _, errors, drawn, answers = open_offline(path, "report-decades.png", js="() => cosympPlots.map(u => u.axes[1]._values)")
+    assert errors == [] and drawn == 2
+    assert answers["js"] == [["1e-5", "0.001", "0.1", "10", "1000", "1e5"],
+                             ["0.01", "0.1", "1", "10", "100", "1000", "10000"]]
+
+
 ORDER_JS = """() => cosympPlots.map(u => ({
     drawn: u.series.slice(1).map(s => [s.label, s.dash ? "dashed" : "solid"]),
     legend: Array.from(u.root.querySelectorAll(".u-legend .u-series")).map(r => r.textContent.replace(/[:–]/g, ""))

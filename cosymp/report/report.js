@@ -19,6 +19,10 @@
     return out.length ? out : [min, max];
   }
 
+  function decade(k) {  /* 10^k as the app writes it: 0.001 ... 10000 plainly, 1e-4 and 1e5 beyond */
+    return k >= -3 && k < 5 ? String(parseFloat(Math.pow(10, k).toPrecision(3))) : "1e" + k;
+  }
+
   function steps(u, axisIdx, min, max) {
     /* 1-2-5 ticks at any magnitude (uPlot's own tables stop near 1e-16) */
     var span = max - min;
@@ -78,7 +82,7 @@
     if (log) {
       a.splits = decades;
       a.values = function (u, vals) {
-        return vals.map(function (v) { return v == null ? "" : (v === Math.round(v) ? "1e" + v : fmt(Math.pow(10, v))); });
+        return vals.map(function (v) { return v == null ? "" : (v === Math.round(v) ? decade(v) : fmt(Math.pow(10, v))); });
       };
     } else {
       a.splits = steps;
