@@ -72,8 +72,8 @@ def pending(D, P):
 
 @njit(**INLINE)
 def row(D, P, C, j):
-    """Make row j of C hold its coefficients: compute them now if the loop left the row pending
-    (its time in the last column, NaN once computed: kernels.loops._coefs), else nothing."""
+    """Make row j of C hold its coefficients where D's rows are pending: compute them now if the
+    loop left the row's time in the last column (kernels.loops._coefs), then mark it NaN."""
     if pending(D, P):
         t = C[j, ncoef(P)]
         if not np.isnan(t):

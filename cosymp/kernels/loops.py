@@ -54,23 +54,25 @@ def scaling_at(P, t):
 
 
 @njit(**INLINE)
-def _coefs(P, offsets, tk, tk1, h, tau, C, reuse, pending):
-    """Time coefficients at the offsets of the step from tk to tk1, read at the scene's time
-    shifted by tau. With `reuse`, the end of the last step (same scaling) is the start of this
-    one (computed or still pending). With `pending` (an interleaved family), each row is left
-    for the step to compute where it uses it (kernels.families.row): its time goes in the last
-    column, NaN marking a computed row."""
+def _coefs(D, P, tk, tk1, h, tau, C, reuse):
+    """Time coefficients at family D's offsets for the step from tk to tk1, read at the scene's
+    time shifted by tau. With `reuse`, the end of the last step (same scaling) is the start of
+    this one (computed or still pending). Where D's rows are `pending` (an interleaved family on a
+    nonlinear scene), each row is left for the step to compute where it uses it
+    (kernels.families.row): its time goes in the last column, which the step sets to NaN."""
+    offsets = D.offsets
     u = len(offsets)
     nc = ncoef(P)
     for j in range(u):
         if j == 0 and reuse:
             for c in range(nc + 1):
                 C[0, c] = C[u - 1, c]
-        elif pending:
-            C[j, nc] = (tk1 if offsets[j] == 1.0 else tk + offsets[j] * h) - tau
+            continue
+        t = (tk1 if offsets[j] == 1.0 else tk + offsets[j] * h) - tau
+        if pending(D, P):
+            C[j, nc] = t
         else:
-            coef(P, (tk1 if offsets[j] == 1.0 else tk + offsets[j] * h) - tau, C, j)
-            C[j, nc] = np.nan
+            coef(P, t, C, j)
 
 
 @njit(**INLINE)
@@ -222,7 +224,7 @@ def _matrix_loop(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, s
     up = down = 1.0
     for k in range(nsteps):
         e, tau, up, down = _scale(P, t0 + k * h, scaled, prev, tau, up, down)
-        _coefs(P, D.offsets, t0 + k * h, t0 + (k + 1) * h, h, tau, C, can_reuse and k > 0 and e == prev, False)
+        _coefs(D, P, t0 + k * h, t0 + (k + 1) * h, h, tau, C, can_reuse and k > 0 and e == prev)
         prev = e
         tk = t0 + k * h - tau
         s = lmatrix(D, P, C, tk, h, M, Q, LW)
@@ -258,8 +260,7 @@ def _members_loop(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, 
     up = down = 1.0
     for k in range(nsteps):
         e, tau, up, down = _scale(P, t0 + k * h, scaled, prev, tau, up, down)
-        _coefs(P, D.offsets, t0 + k * h, t0 + (k + 1) * h, h, tau, C, can_reuse and k > 0 and e == prev,
-               pending(D, P))
+        _coefs(D, P, t0 + k * h, t0 + (k + 1) * h, h, tau, C, can_reuse and k > 0 and e == prev)
         prev = e
         tk = t0 + k * h - tau
         recording = (k + 1) % stride == 0 or k + 1 == nsteps
@@ -316,7 +317,7 @@ def tangent_matrix(D, P, h, T, Z, PT, M):
     Q = matrices(P, 1, 0.0)[0]
     for k in range(T.shape[0]):
         tau = scaling_at(P, T[k])[1]
-        _coefs(P, D.offsets, T[k], T[k] + h, h, tau, C, False, False)
+        _coefs(D, P, T[k], T[k] + h, h, tau, C, False)
         lmatrix(D, P, C, T[k] - tau, h, M[k], Q, LW)
     return OK, T.shape[0]
 
@@ -334,7 +335,7 @@ def tangent_complex(D, P, h, T, Z, PT, M):
     zs = vectors(P, 1, 0.0)[0]
     for k in range(Z.shape[0]):
         e, tau = scaling_at(P, T[k])
-        _coefs(P, D.offsets, T[k], T[k] + h, h, tau, C, False, False)
+        _coefs(D, P, T[k], T[k] + h, h, tau, C, False)
         for r in range(m):
             zs[r] = Z[k, r]
         up, down = _factors(e)

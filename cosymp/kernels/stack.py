@@ -88,8 +88,8 @@ def stage_square(D, P, like):
 
 def coef_table(D, P):
     """The stack table of time coefficients: one row per time offset of D (at most MAX_OFFSETS),
-    and one more column: the row's time where the row is still to be computed, else NaN
-    (kernels.loops._coefs and row)."""
+    and one more column: the row's time while a pending row is still to be computed, NaN once it
+    is (kernels.loops._coefs and kernels.families.row)."""
 
 
 @overload(vectors, jit_options=_IR_INLINE, inline="always", prefer_literal=True)

@@ -57,7 +57,7 @@ from .dispatch import (
     step,
     work,
 )
-from .families import OK, START, pending, row
+from .families import OK, START, row
 from .loops import COMPLEX_STEP, _accept, _add, _coefs, _record_start, _rescale, _scale, coef_at, energy_at
 from .stack import _scene, coef_table, matrices, vectors
 
@@ -320,8 +320,7 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
     for k in range(nsteps):
         g = first + k
         e, tau, up, down = _scale(P, t0 + g * h, scaled, prev, tau, up, down)
-        _coefs(P, D.offsets, t0 + g * h, t0 + (g + 1) * h, h, tau, C, can_reuse and k > 0 and e == prev,
-               pending(D, P))
+        _coefs(D, P, t0 + g * h, t0 + (g + 1) * h, h, tau, C, can_reuse and k > 0 and e == prev)
         prev = e
         tk = t0 + g * h - tau
         mapped = every > 0 and k % every == 0
