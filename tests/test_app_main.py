@@ -7,7 +7,7 @@ import types
 import panel as pn
 
 from app import main, page
-from app.features import FEATURES
+from app.features import FEATURES, base
 
 
 def test_the_page_has_every_view_and_follows_the_study():
@@ -405,10 +405,10 @@ def test_a_page_that_closes_while_written_to_leaves_no_traceback_and_other_failu
 def test_tabs_are_built_ahead_one_at_a_time_while_the_page_is_idle_and_start_no_measurement():
     """App._ahead takes one more step of building the tabs per call (a layout, its joining the page,
     its data drawn), hidden, once the server (every page) has been idle
-    AHEAD_IDLE_S: its layout, and the data at hand drawn; nothing is computed for it (the θ lesson, the long run
-    and the map start on their first showing: computed ahead, every page would hold their memory
-    leases). Gauges and Work-precision are not built ahead. Orbits builds the figures of the
-    two-degree-of-freedom shape, hidden."""
+    AHEAD_IDLE_S: its layout, and the data at hand drawn. Of the computations only the θ lesson's
+    runs ahead, when quick and small (Follower.ahead); the long run and the map start on their first
+    showing (computed ahead, every page would hold their memory leases). Gauges and Work-precision
+    are not built ahead. Orbits builds the figures of the two-degree-of-freedom shape, hidden."""
     app = main.App()
     names = [f.name for f in FEATURES]
     app._ahead()
@@ -435,7 +435,9 @@ def test_tabs_are_built_ahead_one_at_a_time_while_the_page_is_idle_and_start_no_
     assert [len(app.tabs[i]) for i in range(len(names))] == [n not in ("gauges", "workprecision") for n in names]
     assert app.tabs.active == names.index("compare") and app.study.view == "compare"
     lesson = app.states["theta"]
-    assert lesson.results is None and not app.states["long"].data and app.states["map"].result is None
+    assert lesson.results is not None and lesson.sweep is not None and not app.views["theta"]._stale, \
+        "the θ lesson (quick, and its lease under AHEAD_BYTES) is computed and drawn ahead"
+    assert not app.states["long"].data and app.states["map"].result is None
     assert not app.states["workprecision"].measure.rows and app.states["gauges"].results is None
     assert not any(app.views[n]._stale for n in ("structure", "cloud", "play"))
     orbits = app.views["compare"]
@@ -445,6 +447,25 @@ def test_tabs_are_built_ahead_one_at_a_time_while_the_page_is_idle_and_start_no_
     app.study.view = "compare"
     app.study.scene = "charged"
     assert [g.visible for g in orbits.grids] == [False, True], "the charged particle's figures were ready"
+    shown = lesson.results
+    assert not lesson.quick()
+    lesson.ahead()
+    assert lesson.results is shown, "the charged particle's lesson, not quick, waits for its tab"
+    app._stop(None)
+
+
+def test_a_lesson_leasing_more_than_the_ahead_bound_waits_for_its_tab(monkeypatch):
+    """Follower.ahead computes only under AHEAD_BYTES: every open page would hold the lease."""
+    app = main.App()
+    lesson = app.states["theta"]
+    need = lesson._bytes(lesson._inputs())
+    assert lesson.quick() and lesson.results is None
+    monkeypatch.setattr(base, "AHEAD_BYTES", need - 1)
+    lesson.ahead()
+    assert lesson.results is None
+    monkeypatch.setattr(base, "AHEAD_BYTES", need)
+    lesson.ahead()
+    assert lesson.results is not None
     app._stop(None)
 
 

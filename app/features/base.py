@@ -4,8 +4,13 @@ from dataclasses import dataclass, field
 import panel as pn
 import param
 
+from cosymp.errors import InputError
+
 from ..jobs import Job
+from ..memory import MB
 from ..plotting import push
+
+AHEAD_BYTES = 16 * MB  # the largest lease a tab's computation takes ahead of its first showing (Follower.ahead)
 
 
 @dataclass(frozen=True)
@@ -61,9 +66,9 @@ class FeatureView(pn.viewable.Viewer):
 
     def ahead(self):
         """The steps (callables, each a short piece of the server's time) to take ahead of the tab's
-        first showing, its layout built and hidden: draw the data at hand, so that a first visit
-        shows it at once."""
-        return [self._draw_stale]
+        first showing, its layout built and hidden: compute its data where that is quick and small
+        (`Follower.ahead`), and draw the data at hand, so that a first visit shows it at once."""
+        return [*([self.state.ahead] if isinstance(self.state, Follower) else []), self._draw_stale]
 
     def _draw_stale(self):
         if self._stale:
@@ -110,6 +115,19 @@ class Follower(Job):
 
     def applies(self):
         return True
+
+    def ahead(self):
+        """Compute now, for a tab not shown yet, if it applies, is expected to be quick and leases at
+        most AHEAD_BYTES: every open page holds that lease while it shows its other tabs (a larger
+        one is computed when the tab is shown, as before)."""
+        if self.running or not self.applies() or not self.quick():
+            return
+        try:
+            inputs = self._inputs()
+        except InputError:
+            return
+        if inputs is not None and self._bytes(inputs) <= AHEAD_BYTES:
+            self.refresh()
 
     def say(self, note):
         self.study.say(note)
