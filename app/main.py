@@ -4,6 +4,7 @@ Serve it with `panel serve app --setup app/warmup.py` (app/warmup.py makes the c
 ready first). Everything is served from this server: the Bootstrap template, KaTeX and
 BokehJS come from Panel's and Bokeh's bundled resources.
 """
+import asyncio
 import contextlib
 import html
 import io
@@ -17,7 +18,7 @@ from cosymp.errors import InputError, RunError
 
 from .features import FEATURES
 from .jobs import Job, Note
-from .memory import log_when_freed, map_large_blocks
+from .memory import Collector, log_when_freed, map_large_blocks
 from .page import SCRIPTS, Activity, Design, Spares, adjust_panel, serve_locally
 from .plotting import katex_fonts_css, push, rule
 from .presets import URL_NAMES, parse_items, query_items
@@ -164,14 +165,17 @@ class App(param.Parameterized):
         messages of the session's start, and start building the other tabs ahead. A page loading
         counts as a change: no page builds ahead from its request until a second after it is drawn
         (its document was fetched and drawn while closed pages built theirs: 2.1-3.7 s to the
-        first plot over four page loads in a row, against 1.4 s for the first)."""
+        first plot over four page loads in a row, against 1.4 s for the first). The server's full
+        garbage collections move to its idle time (memory.Collector)."""
         Activity.touch()
         self._write_url()
         for note in self._pending:
             self._notify(note.level, note.text)
         self._next_ahead()
         if self._doc is not None and self._doc.session_context is not None:
+            Spares.loaded(self._doc.session_context.session)
             Spares.fill()
+            Collector.start(Activity.idle)
             self._gone = False
             self._watcher = self._doc.add_periodic_callback(self._watch, GONE_MS)
 
@@ -180,12 +184,32 @@ class App(param.Parameterized):
         session would be destroyed by the server's check for unused sessions, which stops it too, but
         not the first page's: Panel keeps that session for good, to write every later page's HTML
         from (Panel's reuse_sessions, app/warmup.py), and its long run or measurement went on after
-        its page had closed."""
+        its page had closed. A closed page's session is then discarded (`_discard`)."""
         gone = self._closed()
         if gone and self._gone:
             self._doc.remove_periodic_callback(self._watcher)
             self._stop(None)
+            self._discard()
         self._gone = gone
+
+    def _discard(self):
+        """Discard the session of a page that has gone, as the server's check for unused sessions
+        would 15-32 s later (`panel serve`'s defaults), unless its expiration is blocked (the session
+        Panel keeps to write pages from; a spare just handed out). Until then every full garbage
+        collection of the server went through its objects: with a few closed pages lingering each
+        took 160-350 ms, in which no page was answered. (Looked at after this callback: it holds
+        the document's lock, which blocks expiration too.)"""
+        context = self._doc.session_context
+        session = getattr(context, "session", None)
+        application = getattr(getattr(context, "server_context", None), "application_context", None)
+        if session is None or application is None:
+            return
+
+        async def discard():
+            if not (session.expiration_blocked or session.connection_count):
+                await application._discard_session(session, lambda s: s.connection_count == 0)
+
+        asyncio.ensure_future(discard())
 
     def _ahead(self):
         """Build the tabs ahead of their first showing, hidden, while the server is idle (no change

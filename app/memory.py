@@ -13,9 +13,18 @@ memory after every page had been closed. `map_large_blocks()` fixes the mmap thr
 (as MALLOC_MMAP_THRESHOLD_=1048576 would): every array of 1 MiB or more is mapped on its own
 and unmapped when freed. `give_back()` returns the free pages of every heap (malloc_trim). Both
 do nothing where the C library is not glibc.
+
+Collector. Python's cycle collector runs a full collection, over every tracked object of the
+process, when enough objects have survived younger collections, inside whatever code allocates the
+last one: here, a page's handler building a tab or a plot. With a few pages open each took
+95-350 ms (it grows with the sessions alive) and came in the middle of a click. `Collector`
+takes full collections off that path: a task on the server's loop runs them between handlers,
+once the server is idle, or after enough younger collections in any case (a closed page's
+session is a web of reference cycles that only a full collection frees).
 """
 import asyncio
 import ctypes
+import gc
 import logging
 import os
 import threading
@@ -99,6 +108,42 @@ def give_back():
     libc = _glibc()
     if libc is not None:
         libc.malloc_trim(0)
+
+
+COLLECT_CHECK_S = 0.25  # how often the collector's task looks
+COLLECT_IDLE_S = 2.0  # a full collection waits for the server to be idle this long...
+COLLECT_DUE = 10  # ...once this many generation-1 collections came after the last full one (Python's own threshold)
+COLLECT_FORCED = 200  # and runs at the next look, idle or not, after this many
+NEVER = 1 << 30
+
+
+class Collector:
+    """Full garbage collections on the server's loop, between handlers (see the module's doc)."""
+
+    task = None
+
+    @classmethod
+    def start(cls, idle):
+        """Turn Python's automatic full collections off and run them from a task instead: when
+        idle(COLLECT_IDLE_S) says the server's pages have been idle that long, or when they are
+        overdue. Once per process, on the server's running loop (without one, nothing changes)."""
+        if cls.task is not None:
+            return
+        try:
+            loop = asyncio.get_running_loop()
+        except RuntimeError:
+            return
+        gen0, gen1, _ = gc.get_threshold()
+        gc.set_threshold(gen0, gen1, NEVER)
+        cls.task = loop.create_task(cls._run(idle))
+
+    @staticmethod
+    async def _run(idle):
+        while True:
+            await asyncio.sleep(COLLECT_CHECK_S)
+            younger = gc.get_count()[2]  # generation-1 collections since the last full one
+            if younger >= COLLECT_FORCED or (younger >= COLLECT_DUE and idle(COLLECT_IDLE_S)):
+                gc.collect()
 
 
 # Logged (under Panel's logger: PANEL_LOG_LEVEL=info shows it beside Panel's session lines) when

@@ -163,15 +163,16 @@ class Spares:
     One spare per app path, once a page without settings has been asked for there. The next is built
     after a page has loaded (`fill`, from the page's onload) and the server has then been idle
     IDLE_S: a build takes the server 0.35-0.6 s, which a change made meanwhile waits for. A spare is
-    kept from the server's check for unused sessions until it is handed out, and HANDED_S after that
-    (its browser connects within a second or two; one that never does is then discarded as any
-    page's session)."""
+    kept from the server's check for unused sessions until it is handed out, and then until its page
+    has loaded (`loaded`) or HANDED_S have passed (its browser connects within a second or two; one
+    that never does is then discarded as any page's session)."""
 
     IDLE_S = 2.0
     HANDED_S = 60.0
     wanted: ClassVar[dict] = {}  # (application context, path) -> (request, application) to build a spare with
     ready: ClassVar[dict] = {}  # (application context, path) -> id of a built session
     building: ClassVar[set] = set()
+    handed: ClassVar[dict] = {}  # id of a spare handed out -> the timer that lets it expire (unless its page loads first)
     _asking = contextvars.ContextVar("cosymp_spare_asking", default=None)
 
     @classmethod
@@ -204,9 +205,22 @@ class Spares:
         session = key[0]._sessions.get(spare) if spare is not None else None
         if session is None:
             return generate_session_id(secret_key=secret_key, signed=signed)
-        asyncio.get_running_loop().call_later(cls.HANDED_S, session.unblock_expiration)
+        cls.handed[spare] = asyncio.get_running_loop().call_later(cls.HANDED_S, cls._unblock, spare, session)
         LOG.info(SPARE_HANDED, spare)
         return spare
+
+    @classmethod
+    def loaded(cls, session):
+        """A page has loaded in this session: if it was a spare, it no longer needs keeping."""
+        timer = cls.handed.get(session.id)
+        if timer is not None:
+            timer.cancel()
+            cls._unblock(session.id, session)
+
+    @classmethod
+    def _unblock(cls, spare, session):
+        del cls.handed[spare]
+        session.unblock_expiration()
 
     @classmethod
     def fill(cls):

@@ -503,9 +503,9 @@ def test_a_session_built_ahead_of_its_page_serves_its_stylesheets_locally():
 
 def test_a_page_whose_browser_has_gone_stops_at_the_second_look():
     """App._watch (every GONE_MS after the page has loaded): a page seen without a connection twice in a
-    row stops (its runs cancelled, its leases given back), as its session's destruction would do; once
-    is not enough (a connection being replaced), and the first page's session, which Panel keeps for
-    good, is not waited for."""
+    row stops (its runs cancelled, its leases given back) and its session is discarded (as the server's
+    check for unused sessions would, half a minute later); once is not enough (a connection being
+    replaced), and the first page's session, which Panel keeps for good, is not waited for."""
     app = main.App()
     removed = []
     session = types.SimpleNamespace(connection_count=1)
@@ -521,8 +521,25 @@ def test_a_page_whose_browser_has_gone_stops_at_the_second_look():
     session.connection_count = 0
     app._watch()
     assert not app._stopped, "back, then gone once again"
-    app._watch()
+    discarded = []
+
+    async def discard_session(s, should_discard):
+        discarded.append((s, should_discard(s)))
+
+    app._doc.session_context.server_context = types.SimpleNamespace(
+        application_context=types.SimpleNamespace(_discard_session=discard_session))
+    session.expiration_blocked = False
+
+    async def look(call):
+        call()
+        await asyncio.sleep(0)
+
+    asyncio.run(look(app._watch))
     assert app._stopped and removed == ["watcher"] and app.study._closed
+    assert discarded == [(session, True)], "its session is discarded, not left to the server's check"
+    session.expiration_blocked = True
+    asyncio.run(look(app._discard))
+    assert len(discarded) == 1, "a session whose expiration is blocked (the one Panel keeps) is not"
 
 
 def test_a_scene_change_drops_another_scenes_long_run_and_map_and_the_shown_tab_computes_the_new_one():
@@ -562,7 +579,8 @@ def test_a_page_without_settings_gets_the_spare_session_and_a_link_with_settings
     """page.Spares.session_id, which Panel's handler of a page's request calls (once page.adjust_panel
     has run) for the id of the session it builds while the page loads: the spare's for a request
     without settings (its build then finds it built), kept from the check for unused sessions until
-    HANDED_S after; a new id for a link with settings, or when the spare was discarded meanwhile.
+    its page has loaded (Spares.loaded) or HANDED_S have passed; a new id for a link with settings,
+    or when the spare was discarded meanwhile.
     The served flow, from the spare's build to its page, is test_app_e2e's."""
     from panel.io import server
 
@@ -572,9 +590,11 @@ def test_a_page_without_settings_gets_the_spare_session_and_a_link_with_settings
         "Panel's warm sessions no longer work this way: revisit app/page.Spares"
     monkeypatch.setattr(page.Spares, "HANDED_S", 0.05)
     monkeypatch.setattr(page.Spares, "ready", {})
+    monkeypatch.setattr(page.Spares, "handed", {})
     unblocked = []
-    spare = types.SimpleNamespace(unblock_expiration=lambda: unblocked.append("spare"))
-    context = type("Context", (), {"_sessions": {"spare-id": spare}})()
+    spare = types.SimpleNamespace(id="spare-id", unblock_expiration=lambda: unblocked.append("spare"))
+    loads = types.SimpleNamespace(id="loads-id", unblock_expiration=lambda: unblocked.append("loads"))
+    context = type("Context", (), {"_sessions": {"spare-id": spare, "loads-id": loads}})()
     plain = (context, "/app")
 
     async def ask(key):
@@ -593,7 +613,14 @@ def test_a_page_without_settings_gets_the_spare_session_and_a_link_with_settings
         again = await ask(plain)
         assert again not in ("spare-id", with_settings), "one page per spare"
         await asyncio.sleep(0.1)
-        assert unblocked == ["spare"]
+        assert unblocked == ["spare"] and page.Spares.handed == {}
+        page.Spares.ready[plain] = "loads-id"
+        assert await ask(plain) == "loads-id"
+        page.Spares.loaded(loads)
+        page.Spares.loaded(spare)
+        assert unblocked == ["spare", "loads"], "a spare whose page has loaded is kept no longer"
+        await asyncio.sleep(0.1)
+        assert unblocked == ["spare", "loads"], "and is let go once"
         page.Spares.ready[plain] = "discarded-id"
         assert await ask(plain) != "discarded-id"
 

@@ -805,6 +805,43 @@ def test_a_freed_app_gives_memory_back_then_is_logged_after_its_collection(monke
     assert events == ["give_back", memory.FREED] * 2
 
 
+def test_full_collections_wait_for_the_idle_server_unless_overdue(monkeypatch):
+    """memory.Collector: on a running loop, Python's automatic full collections are off (its
+    generation-2 threshold out of reach) and the task collects once enough generation-1
+    collections have come and the server is idle, or once they are overdue whatever the activity;
+    without a loop nothing changes."""
+    import asyncio
+
+    monkeypatch.setattr(memory.Collector, "task", None)
+    monkeypatch.setattr(memory, "COLLECT_CHECK_S", 0.0)
+    before = gc.get_threshold()
+    monkeypatch.setattr(gc, "set_threshold", lambda *t: thresholds.append(t))
+    thresholds, full = [], []
+    younger = [0]
+    monkeypatch.setattr(gc, "get_count", lambda: (0, 0, younger[0]))
+    monkeypatch.setattr(gc, "collect", lambda *a: full.append(younger[0]))
+    idle = [False]
+
+    memory.Collector.start(lambda seconds: idle[0] and seconds == memory.COLLECT_IDLE_S)
+    assert memory.Collector.task is None and thresholds == [], "no loop: Python's own collections stay"
+
+    async def served():
+        memory.Collector.start(lambda seconds: idle[0] and seconds == memory.COLLECT_IDLE_S)
+        task = memory.Collector.task
+        memory.Collector.start(lambda seconds: True)
+        assert memory.Collector.task is task, "one task per process"
+        for count, is_idle in ((memory.COLLECT_DUE - 1, True), (memory.COLLECT_DUE, False),
+                               (memory.COLLECT_DUE, True), (memory.COLLECT_FORCED, False)):
+            younger[0], idle[0] = count, is_idle
+            for _ in range(3):
+                await asyncio.sleep(0)
+        task.cancel()
+
+    asyncio.run(served())
+    assert thresholds == [(before[0], before[1], memory.NEVER)]
+    assert full and set(full) == {memory.COLLECT_DUE, memory.COLLECT_FORCED}, full
+
+
 def test_a_long_run_whose_page_closed_stops_and_publishes_nothing_more(monkeypatch):
     """release() (the session was destroyed): the run stops after its chunk, gives its lease back,
     and publishes neither the envelopes computed since the last redraw nor a status."""
