@@ -30,6 +30,7 @@ NOTIFY_MS = {"error": 8000, "warning": 6000, "info": 4000}
 AHEAD_MS = 100  # one step of building tabs ahead at most this often (App._ahead)
 AHEAD_IDLE_S = 1.0  # after the last change in any page of the server
 GONE_MS = 1000  # a page whose browser has gone this long stops (App._watch)
+DISCARDING = set()  # the tasks discarding closed pages' sessions (App._discard)
 COPY_LINK_JS = """
 const label = 'Copy link to this view';
 const done = (text) => { source.label = text; setTimeout(() => { source.label = label; }, 2500); };
@@ -209,7 +210,9 @@ class App(param.Parameterized):
             if not (session.expiration_blocked or session.connection_count):
                 await application._discard_session(session, lambda s: s.connection_count == 0)
 
-        asyncio.ensure_future(discard())
+        task = asyncio.ensure_future(discard())
+        DISCARDING.add(task)  # the loop keeps only a weak reference to a task
+        task.add_done_callback(DISCARDING.discard)
 
     def _ahead(self):
         """Build the tabs ahead of their first showing, hidden, while the server is idle (no change

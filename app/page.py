@@ -212,7 +212,7 @@ class Spares:
     @classmethod
     def loaded(cls, session):
         """A page has loaded in this session: if it was a spare, it no longer needs keeping."""
-        timer = cls.handed.get(session.id)
+        timer = cls.handed.get(getattr(session, "id", None))
         if timer is not None:
             timer.cancel()
             cls._unblock(session.id, session)

@@ -521,6 +521,10 @@ def test_a_page_whose_browser_has_gone_stops_at_the_second_look():
     session.connection_count = 0
     app._watch()
     assert not app._stopped, "back, then gone once again"
+    from bokeh.server.contexts import ApplicationContext
+
+    assert list(inspect.signature(ApplicationContext._discard_session).parameters) == \
+        ["self", "session", "should_discard"], "Bokeh discards sessions another way now: revisit App._discard"
     discarded = []
 
     async def discard_session(s, should_discard):
