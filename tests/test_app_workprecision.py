@@ -242,9 +242,16 @@ def test_long_horizons_past_the_reference_show_the_horizons_before_it():
     assert lh.capped.startswith("Shown up to T = 5000, not to the 10000 asked for: the exact flow leaves floating "
                                 "point at t ≈ 7")
     assert "T = 10000 needs parameters with a growth rate 1.5× smaller" in lh.capped
+    empty = views.WorkPrecisionView(s, SimpleNamespace(measure=WorkPrecision(s, methods=["rk4"]),
+                                                       long=LongHorizons(s)))
+    empty.__panel__()
+    empty.update()
+    assert empty.drift_plots is None and not empty.long_box.objects, "no long horizons: no figures built for them"
     view = views.WorkPrecisionView(s, SimpleNamespace(measure=WorkPrecision(s, methods=["rk4"]), long=lh))
     view.__panel__()
     view.update()
+    assert view.long_box.visible and len(view.long_box.objects) == 5
+    assert all(len(p.fig.renderers) for p in view.drift_plots) and view.growth.object is not None
     assert html.unescape(view.long_capped.object) == f"<p class='caveat'>{lh.capped}</p>"
     s.scene = "modulated"
     view.update()

@@ -564,16 +564,14 @@ class WorkPrecisionView(FeatureView):
         self.wp_plots = [WorkPrecisionPlot(key, title, m.open_row) for key, title in
                          (("error", "relative error at T against wall time"),
                           ("H_ext_max_abs", "max |H~| = max |H + p_t| against wall time"))]
-        self.drift_plots = [DriftPlot(key, title) for key, title in
-                            (("error", "relative error at T, at fixed h"), ("H_ext_max_abs", "max |H~| up to T, at fixed h"))]
+        self.drift_plots = None  # built with the first long horizons (`_long_figures`): most visits run none
         self.wp_hint = note("<p class='doc'>Nothing measured yet: press Start.</p>")
         self.wp_failed, self.long_failed, self.long_capped = note(""), note(""), note("")
         self.wp_reference, self.long_reference = note(""), note("")
-        self.targets, self.growth = table(["time to reach"]), table(["method"])
+        self.targets = table(["time to reach"])
         self.wp_box = pn.Column(*[pane(p.fig) for p in self.wp_plots], self.wp_reference, note(TARGETS_TEXT),
                                 self.targets, visible=False, **wide)
-        self.long_box = pn.Column(*[pane(p.fig) for p in self.drift_plots], self.long_reference, note(GROWTH_TEXT),
-                                  self.growth, visible=False, **wide)
+        self.long_box = pn.Column(visible=False, **wide)
         self.follow(m, "rows", "running")
         self.follow(lh, "rows", "capped")
         return pn.Column(
@@ -609,10 +607,22 @@ class WorkPrecisionView(FeatureView):
             self.wp_reference.object = reference_html(m.rows)
             self.targets.object = pd.DataFrame(targets_table(m.rows))
         if lh.rows:
+            if self.drift_plots is None:
+                self._long_figures()
             for p in self.drift_plots:
                 p.set(lh.rows)
             self.long_reference.object = reference_html(lh.rows)
             self.growth.object = pd.DataFrame(growth_table(lh.rows))
+
+
+    def _long_figures(self):
+        """The long horizons' figures and table, built when their first rows come: a tab built with
+        them held 2 more figures and a table (of its 4 and 2) that a first visit sent and laid out."""
+        self.drift_plots = [DriftPlot(key, title) for key, title in
+                            (("error", "relative error at T, at fixed h"), ("H_ext_max_abs", "max |H~| up to T, at fixed h"))]
+        self.growth = table(["method"])
+        self.long_box.objects = [*[pane(p.fig) for p in self.drift_plots], self.long_reference, note(GROWTH_TEXT),
+                                 self.growth]
 
 
 class Measurements:
