@@ -308,6 +308,13 @@ def test_work_precision_measures_a_click_opens_the_point_and_long_horizons_cance
     page.page.locator("button:visible", has_text="Cancel").nth(1).click()
     page.page.get_by_text("cancelled after").first.wait_for(timeout=5_000)
     assert time.monotonic() - clicked < 5
+    # Run to the end: the long horizons' figures, built at the first Start, draw the rows, and their
+    # stylesheets come from this server (built when the rows came, they were linked from Panel's CDN).
+    page.page.locator("select:has(option[value='1e+06'])").select_option("1e+03")
+    page.page.locator("button", has_text="Start long horizons").click()
+    page.page.locator("b.wpstatus", has_text="done in").nth(1).wait_for(timeout=60_000)
+    page.page.wait_for_function(f"() => {{ {PLOT_VIEW_JS}; const v = plotView('relative error at T, at fixed h'); "
+                                "return v !== null && v.model.renderers.some((r) => r.data_source.get_length() > 0); }")
     page.check()
 
 

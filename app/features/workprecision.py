@@ -535,10 +535,17 @@ def growth_table(rows):
     return cols
 
 
-def run_controls(job, start_label):
-    """Start and Cancel buttons, a progress bar, the current run's label and the status line."""
+def run_controls(job, start_label, before_start=None):
+    """Start and Cancel buttons, a progress bar, the current run's label and the status line;
+    before_start() is called in the Start button's handler, before the job starts."""
     start = pn.widgets.Button(name=start_label, button_type="primary", disabled=job.param.running)
-    start.on_click(lambda event: job.start())
+
+    def started(event):
+        if before_start is not None:
+            before_start()
+        job.start()
+
+    start.on_click(started)
     cancel = pn.widgets.Button(name="Cancel", button_type="danger", disabled=pn.bind(lambda r: not r, job.param.running))
     cancel.on_click(lambda event: job.cancel())
     progress = pn.indicators.Progress(value=pn.bind(lambda p: round(100 * p), job.param.progress), max=100, width=220,
@@ -560,7 +567,7 @@ class WorkPrecisionView(FeatureView):
         m, lh = self.state.measure, self.state.long
         wide = {"sizing_mode": "stretch_width"}
         wp_row, wp_status = run_controls(m, "Start work–precision")
-        long_row, long_status = run_controls(lh, "Start long horizons")
+        long_row, long_status = run_controls(lh, "Start long horizons", self._long_figures)
         self.wp_plots = [WorkPrecisionPlot(key, title, m.open_row) for key, title in
                          (("error", "relative error at T against wall time"),
                           ("H_ext_max_abs", "max |H~| = max |H + p_t| against wall time"))]
@@ -607,8 +614,7 @@ class WorkPrecisionView(FeatureView):
             self.wp_reference.object = reference_html(m.rows)
             self.targets.object = pd.DataFrame(targets_table(m.rows))
         if lh.rows:
-            if self.drift_plots is None:
-                self._long_figures()
+            self._long_figures()
             for p in self.drift_plots:
                 p.set(lh.rows)
             self.long_reference.object = reference_html(lh.rows)
@@ -616,8 +622,12 @@ class WorkPrecisionView(FeatureView):
 
 
     def _long_figures(self):
-        """The long horizons' figures and table, built when their first rows come: a tab built with
-        them held 2 more figures and a table (of its 4 and 2) that a first visit sent and laid out."""
+        """The long horizons' figures and table, built once, when long horizons are first started: a
+        tab built with them held 2 more figures and a table (of its 4 and 2) that a first visit sent
+        and laid out. Built in the Start button's handler, not when the rows come: built from the
+        measurement's end on the loop, their stylesheets were linked from Panel's CDN."""
+        if self.drift_plots is not None:
+            return
         self.drift_plots = [DriftPlot(key, title) for key, title in
                             (("error", "relative error at T, at fixed h"), ("H_ext_max_abs", "max |H~| up to T, at fixed h"))]
         self.growth = table(["method"])
