@@ -37,9 +37,9 @@ PLOTS = {
 }
 
 
-def time_plots(keys):
-    """{key: Curves} of the PLOTS named."""
-    return {k: Curves(PLOTS[k][0], "t", PLOTS[k][1], log=PLOTS[k][2]) for k in keys}
+def time_plots(keys, log=()):
+    """{key: Curves} of the PLOTS named; those in `log` on a log axis from the start whatever PLOTS says."""
+    return {k: Curves(PLOTS[k][0], "t", PLOTS[k][1], log=PLOTS[k][2] or k in log) for k in keys}
 
 
 def update_plots(plots, runs):

@@ -14,7 +14,7 @@ from ..study import SECONDS_PER_STEP, Runs, comparison_bytes, expected_quick, fa
 from .base import Feature, FeatureView, Follower
 from .cloud import Snapshots, loops
 from .common import color_key
-from .structure import PLOTS, time_plots, update_plots
+from .structure import time_plots, update_plots
 
 SWEEP_THETAS = np.linspace(0.0, 1.0, 21)
 SWEEP_STEPS = 200
@@ -127,9 +127,7 @@ class ThetaView(FeatureView):
         # the lifted one's at most θ, and a linear figure swapped for a log one at the first data cost the
         # first visit a second figure (0.1-0.7 s of the server's time and a layout in the browser; the
         # area's came whenever the tab was built ahead and its lesson computed at the visit).
-        area_title, area_label = PLOTS["area"][:2]
-        self.plots = {**time_plots(["det", "symp"]),
-                      "area": Curves(area_title, "t", area_label, log=True),
+        self.plots = {**time_plots(["det", "symp", "area"], log={"area"}),
                       "energy": Curves("|H~| = |H + p_t|", "t", "|H + p_t|", log=True)}
         self.snapshots = {slot: Snapshots(f"{label}: loop at t = 0 (light), T/4, T/2, 3T/4, T (dark)")
                           for slot, label in zip(("A", "B"), ("lifted", "naive"))}

@@ -620,7 +620,6 @@ class WorkPrecisionView(FeatureView):
             self.long_reference.object = reference_html(lh.rows)
             self.growth.object = pd.DataFrame(growth_table(lh.rows))
 
-
     def _long_figures(self):
         """The long horizons' figures and table, built once, when long horizons are first started: a
         tab built with them held 2 more figures and a table (of its 4 and 2) that a first visit sent
