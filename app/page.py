@@ -22,6 +22,8 @@ from panel.reactive import Syncable
 from panel.theme import Bootstrap
 from tornado.websocket import WebSocketClosedError, WebSocketHandler
 
+from . import properties
+
 REBOOT = "app/static/bootstrap_reboot.css"  # Bootstrap's Reboot section, verbatim (see Design)
 # BokehJS adjusted in the page (served from app/static by the server; see each file).
 SCRIPTS = {"cosymp_bokeh_reads": "app/static/bokeh_reads.js", "cosymp_bokeh_layouts": "app/static/bokeh_layouts.js"}
@@ -254,7 +256,9 @@ def adjust_panel():
     widget to merge; each computation here merges the changes made while it runs), and what it
     causes reaches the page in one message. Pages load only the BokehJS bundles they use, no
     queued message waits for the next change to be sent, a page that closes while being
-    written to leaves no traceback in the log, and a page without settings gets a spare session."""
+    written to leaves no traceback in the log, a page without settings gets a spare session, and
+    Bokeh's properties compute their per-class constants once (app/properties.py)."""
+    properties.install()
     Resources._default_components = BOKEH_BUNDLES
     Syncable._debounce = 0
     if not getattr(Syncable._change_event, "cosymp", False):
