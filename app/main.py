@@ -27,7 +27,7 @@ from .warmup import prepare
 
 ASSETS = Path(__file__).resolve().parent.parent / "assets"
 NOTIFY_MS = {"error": 8000, "warning": 6000, "info": 4000}
-AHEAD_MS = 100  # one step of building tabs ahead at most this often (App._ahead)
+AHEAD_MS = 50  # one step of building tabs ahead at most this often (App._ahead)
 AHEAD_IDLE_S = 1.0  # after the last change in any page of the server
 GONE_MS = 1000  # a page whose browser has gone this long stops (App._watch)
 DISCARDING = set()  # the tasks discarding closed pages' sessions (App._discard)
@@ -91,7 +91,6 @@ class App(param.Parameterized):
         for f in FEATURES:
             if f.url:
                 self.states[f.name].param.watch(lambda e: self._write_url(), list(f.url))
-        Activity.touch()
         self._ahead_done = set()
         self._ahead_steps = self._ahead_work()
         self.study.param.watch(Activity.touch, [*Study.INPUTS, "view"])
@@ -220,7 +219,10 @@ class App(param.Parameterized):
         once (it cost 0.5-1.8 s to build there, most of it the browser's), at the price of the
         server's idle time and the page's memory. One step every AHEAD_MS (`_ahead_work`): a change
         that comes while one runs waits for that step only (a whole tab at once took the server
-        0.3-0.45 s, and a scene change made in the first seconds of a page waited 0.6 s)."""
+        0.3-0.45 s, and a scene change made in the first seconds of a page waited 0.6 s). With
+        Bokeh's properties memoized (app/properties.py) steps take 10-90 ms, and every tab is built
+        about 2 s after the page is drawn (at 0.1 s between steps and with a spare session's build
+        counted as a page's change, 4 s: a tab clicked 3 s after the page was often not built)."""
         if self._stopped or self._closed():
             return
         busy = any(j.running for j in self.jobs)
@@ -232,7 +234,7 @@ class App(param.Parameterized):
         self._next_ahead()
 
     def _ahead_work(self):
-        """The steps of building ahead, 0.1-0.3 s each, per feature with `ahead`: its layout built,
+        """The steps of building ahead, 10-90 ms each, per feature with `ahead`: its layout built,
         its layout joining the page (unless its tab was shown meanwhile), then its view's own steps
         (`FeatureView.ahead`: the data at hand drawn)."""
         for i, f in enumerate(FEATURES):

@@ -1,13 +1,15 @@
 """The served page (app/main.py) composed in-process, without a server or a browser."""
 import asyncio
+import datetime
 import inspect
+import math
 import pathlib
 import types
 
 import panel as pn
 
 from app import main, page
-from app.features import FEATURES, base
+from app.features import FEATURES, base, workprecision
 
 
 def test_the_page_has_every_view_and_follows_the_study():
@@ -402,13 +404,15 @@ def test_a_page_that_closes_while_written_to_leaves_no_traceback_and_other_failu
             "Panel no longer leaves a closed page's writes unretrieved: drop app/page.closed_writes_seen"
 
 
-def test_tabs_are_built_ahead_one_at_a_time_while_the_page_is_idle_and_start_no_measurement():
+def test_tabs_are_built_ahead_one_at_a_time_while_the_page_is_idle_and_start_no_measurement(monkeypatch):
     """App._ahead takes one more step of building the tabs per call (a layout, its joining the page,
     its data drawn), hidden, once the server (every page) has been idle
     AHEAD_IDLE_S: its layout, and the data at hand drawn. Of the computations only the θ lesson's
     runs ahead, when quick and small (Follower.ahead); the long run and the map start on their first
-    showing (computed ahead, every page would hold their memory leases). Gauges and Work-precision
-    are not built ahead. Orbits builds the figures of the two-degree-of-freedom shape, hidden."""
+    showing (computed ahead, every page would hold their memory leases), and Work-precision draws
+    only this server's measurement of the same inputs (another page's). Gauges is not built ahead.
+    Orbits builds the figures of the two-degree-of-freedom shape, hidden."""
+    monkeypatch.setattr(workprecision, "MEASURED", {})  # no other test's measurement
     app = main.App()
     names = [f.name for f in FEATURES]
     app._ahead()
@@ -431,14 +435,15 @@ def test_tabs_are_built_ahead_one_at_a_time_while_the_page_is_idle_and_start_no_
     for _ in range(4 * len(FEATURES)):
         app._ahead()
     assert next(app._ahead_steps, None) is None, "every step taken"
-    assert app._ahead_done == {f.name for f in FEATURES if f.ahead} == set(names) - {"gauges", "workprecision"}
-    assert [len(app.tabs[i]) for i in range(len(names))] == [n not in ("gauges", "workprecision") for n in names]
+    assert app._ahead_done == {f.name for f in FEATURES if f.ahead} == set(names) - {"gauges"}
+    assert [len(app.tabs[i]) for i in range(len(names))] == [n != "gauges" for n in names]
     assert app.tabs.active == names.index("compare") and app.study.view == "compare"
     lesson = app.states["theta"]
     assert lesson.results is not None and lesson.sweep is not None and not app.views["theta"]._stale, \
         "the θ lesson (quick, and its lease under AHEAD_BYTES) is computed and drawn ahead"
     assert not app.states["long"].data and app.states["map"].result is None
-    assert not app.states["workprecision"].measure.rows and app.states["gauges"].results is None
+    measure = app.states["workprecision"].measure
+    assert not measure.rows and not measure.running and app.states["gauges"].results is None
     assert not any(app.views[n]._stale for n in ("structure", "cloud", "play"))
     orbits = app.views["compare"]
     assert len(orbits.grids) == 2 and [g.visible for g in orbits.grids] == [True, False]
@@ -451,6 +456,39 @@ def test_tabs_are_built_ahead_one_at_a_time_while_the_page_is_idle_and_start_no_
     lesson.quick = lambda: False  # what this server has seen decides it (LESSON_SECONDS_PER_STEP): here, not quick
     lesson.ahead()
     assert lesson.results is shown, "a lesson not expected to be quick waits for its tab"
+    app._stop(None)
+
+
+def test_building_a_pages_session_is_no_change_its_load_is(monkeypatch):
+    """A session built ahead of its page (a spare, app/page.Spares) counted as a page's change: every
+    page's building ahead then waited AHEAD_IDLE_S more, and a tab clicked 3 s after its page was
+    often not built. The page's request and its load count (served, onload runs at the load)."""
+    loads = []
+    monkeypatch.setattr(pn.state, "onload", lambda callback, threaded=False: loads.append(callback))
+    page.Activity.last = before = page.Activity.last - 10
+    app = main.App()
+    assert page.Activity.last == before and loads == [app._flush]
+    app._flush()
+    assert page.Activity.last > before
+    app._stop(None)
+
+
+def test_work_precision_is_drawn_ahead_with_the_servers_measurement_of_the_same_inputs(monkeypatch):
+    """Another page measured these inputs: a page building its tabs ahead draws that measurement in
+    its hidden Work-precision tab (a class opening the tab sees it at once); nothing is measured ahead."""
+    rows = [{"kind": "cosymp", "solver": "midpoint", "h": 0.1, "T": 50.0, "rtol": math.nan, "wall_s": 1e-4,
+             "error": 1e-3, "H_ext_max_abs": 1e-4, "det_max_dev": 0.0, "steps": 500, "status": "ok", "order": 2,
+             "preserves": "symplectic", "reference": "exact flow", "reference_uncertainty": 0.0}]
+    monkeypatch.setattr(workprecision, "MEASURED", {})
+    app = main.App()
+    measure, view = app.states["workprecision"].measure, app.views["workprecision"]
+    workprecision.MEASURED[workprecision.key(measure._inputs())] = (rows, datetime.datetime.now())
+    page.Activity.last -= main.AHEAD_IDLE_S
+    for _ in range(4 * len(FEATURES)):
+        app._ahead()
+    assert measure.rows == rows and not measure.running and "by this server" in measure.status
+    assert not view._stale and view.wp_box.visible
+    assert list(view.wp_plots[0].points.data["x"]) == [1e-4]
     app._stop(None)
 
 
