@@ -26,7 +26,8 @@ from . import properties
 
 REBOOT = "app/static/bootstrap_reboot.css"  # Bootstrap's Reboot section, verbatim (see Design)
 # BokehJS adjusted in the page (served from app/static by the server; see each file).
-SCRIPTS = {"cosymp_bokeh_reads": "app/static/bokeh_reads.js", "cosymp_bokeh_layouts": "app/static/bokeh_layouts.js"}
+SCRIPTS = {"cosymp_bokeh_reads": "app/static/bokeh_reads.js", "cosymp_bokeh_layouts": "app/static/bokeh_layouts.js",
+           "cosymp_bokeh_sends": "app/static/bokeh_sends.js"}
 
 
 class Design(Bootstrap):

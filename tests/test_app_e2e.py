@@ -33,8 +33,8 @@ def test_opens_on_the_first_view_and_a_slider_updates_the_plots(page):
     steps = f"{round(lead_case.T / lead_case.h):,}"
     assert ["steps", steps, steps] in page.numbers()
     expect(page.page.locator("p.verdict")).to_contain_text("rk4 drifts, midpoint does not")
-    assert page.page.evaluate("[window.cosymp_bokeh_reads, window.cosymp_bokeh_layouts]") == [True, True], \
-        "app/static/bokeh_reads.js or bokeh_layouts.js did not apply"
+    assert page.page.evaluate("[window.cosymp_bokeh_reads, window.cosymp_bokeh_layouts, window.cosymp_bokeh_sends]") \
+        == [True, True, True], "app/static/bokeh_reads.js, bokeh_layouts.js or bokeh_sends.js did not apply"
     page.page.wait_for_function("() => [...document.fonts].some((f) => f.family.replaceAll('\"', '') === "
                                 "'cosymp-KaTeX_Main' && f.status === 'loaded')", timeout=10_000)
     assert not page.page.evaluate("[...document.fonts].filter((f) => f.status === 'error').map((f) => f.family)")
@@ -400,3 +400,76 @@ def test_download_report_saves_a_self_contained_file_that_draws_offline(page, br
     blocked, errors, plots, drawn = open_report_offline(browser, path, "app-report.png")
     assert blocked == [] and errors == [], (blocked, errors)
     assert plots == str(drawn) == "7", (plots, drawn)
+
+
+SENDS_JS = """() => {
+  // app/static/bokeh_sends.js on BokehJS's own ClientSession, with a connection that records what
+  // is sent and answers only when told.
+  const {ClientSession} = Bokeh.require("client/session");
+  const {Message} = Bokeh.require("protocol/message");
+  const {Document} = Bokeh.require("document");
+  const {Slider, Button} = Bokeh.require("models/widgets");
+  const doc = new Document();
+  const slider = new Slider({start: 0, end: 10, value: 0, step: 1});
+  const button = new Button({subscribed_events: new Set(["button_click"])});  // as a button with a handler
+  doc.add_root(slider);
+  doc.add_root(button);
+  const sent = [];
+  const session = new ClientSession({send: (m) => sent.push(m)}, doc);
+  const events = (m) => m.content.events.map((e) => e.kind === "ModelChanged" ? `${e.attr}=${e.new}` : e.kind);
+  const reply = (type, m, content) => session.handle(new Message({msgtype: type, msgid: `r${m.msgid()}`, reqid: m.msgid()},
+                                                                 {}, content));
+  const ok = (m) => reply("OK", m, {});
+  slider.value = 1;
+  slider.value = 2;
+  slider.value_throttled = 2;
+  slider.value = 3;
+  const before = sent.length;
+  button.trigger_event(new (Bokeh.require("core/bokeh_events").ButtonClick)());
+  slider.value = 4;
+  slider.value = 5;
+  ok(sent[0]);
+  const second = sent.length;
+  ok(sent[0]);  // a late or repeated answer sends nothing twice
+  slider.value = 6;
+  const third = sent.length;
+  reply("ERROR", sent[1], {text: "refused"});
+  return {before, second, third, after: sent.length, messages: sent.map(events)};
+}"""
+
+
+def test_a_burst_of_changes_goes_as_one_message_per_answer_in_order_with_superseded_values_left_out(page):
+    """app/static/bokeh_sends.js: the first change goes at once; what changes before the server
+    answers goes in one message when it does, each property's last value only, but never across a
+    click (its handler must see the values set before it); an ERROR answer counts as an answer."""
+    page.open()
+    page.page.wait_for_selector(TABLE_ROW)
+    out = page.page.evaluate(SENDS_JS)
+    assert out["before"] == 1 and out["second"] == 2 and out["third"] == 2 and out["after"] == 3, out
+    assert out["messages"] == [["value=1"], ["value_throttled=2", "value=3", "MessageSent", "value=5"], ["value=6"]]
+    assert [e for e in page.errors if "refused" in e] == [page.errors.pop()], "BokehJS logs the ERROR answer, as before"
+    page.check()
+
+
+def test_twenty_quick_key_presses_on_a_slider_reach_the_server_in_a_few_messages_and_the_last_value_wins(page):
+    """Without app/static/bokeh_sends.js the page sent two messages per press (the slider's value and
+    its throttled value), 40, and the server read them one by one long after the last press."""
+    page.open(query(scene="damped"))
+    page.page.wait_for_selector(TABLE_ROW)
+    patches = []
+    page.page.on("websocket", lambda ws: ws.on("framesent", lambda frame: patches.append(frame)
+                                               if isinstance(frame, str) and '"msgtype":"PATCH-DOC"' in frame else None))
+    page.page.reload()  # the listener sees the page's own websocket
+    page.page.wait_for_selector(TABLE_ROW)
+    handle = page.page.locator(".noUi-handle[aria-valuenow='0.2']").element_handle()
+    handle.focus()
+    before, sent = page.numbers(), len(patches)
+    for _ in range(20):
+        page.page.keyboard.press("ArrowRight")
+    page.wait_for_numbers_change(before)
+    last = float(handle.get_attribute("aria-valuenow"))
+    assert last > 0.2
+    page.page.wait_for_function("(v) => Math.abs(JSON.parse(new URL(location.href).searchParams.get('p')).gamma - v) "
+                                "< 1e-9 * Math.abs(v)", arg=last, timeout=WAIT_MS)
+    assert len(patches) - sent < 20, len(patches) - sent
+    page.check()
