@@ -279,3 +279,31 @@ def test_a_map_any_page_computed_is_shown_at_once_to_the_next_that_asks(tongue):
         other.start()
     kept = [key for kind, key in jobs.REMEMBERED if kind == StabilityMap.KIND]
     assert [k.shape for k in kept] == [(n, 2) for n in range(2, 2 + StabilityMap.KEEP)]
+
+
+def test_the_map_view_has_its_figure_before_any_map_and_draws_a_recalled_map_ahead(tongue):
+    """The heat map's figure is built with the tab (for the axis kinds it opens with) and shown when a
+    map comes, so a first visit sends data, not a figure; built ahead, the tab draws a map this server
+    computed for the same inputs, and computes none (a new map waits for the visit)."""
+    _, m = tongue
+    m.start()  # remembered by the server (each test's memory starts empty)
+    fresh = StabilityMap(Study(scene="modulated"), nx=9, ny=5)
+    view = maps.StabilityMapView(fresh.study, fresh)
+    layout = view.__panel__()
+    [plot] = view.plots.values()
+    assert plot.box in view.box.objects and not plot.box.visible and view.hint.visible
+    for step in view.ahead():
+        step()
+    assert fresh.result is m.result and fresh.run is None, "recalled, not computed"
+    assert plot.box.visible and not view.hint.visible and len(plot.source.data["z"]) == 45
+    assert view.box.objects == [view.hint, plot.box] and layout is view.__panel__()
+    other = StabilityMap(Study(scene="modulated"), nx=7, ny=5)
+    ahead = maps.StabilityMapView(other.study, other)
+    ahead.__panel__()
+    for step in ahead.ahead():
+        step()
+    assert other.result is None and other.run is None and not other.running, "a new map waits for the tab"
+    other.x_log = not other.x_log  # axes of another kind: a figure of its own, shown alone
+    other.start()
+    ahead.update()
+    assert len(ahead.plots) == 2 and [p.box.visible for p in ahead.plots.values()] == [False, True]
