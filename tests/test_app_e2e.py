@@ -33,8 +33,9 @@ def test_opens_on_the_first_view_and_a_slider_updates_the_plots(page):
     steps = f"{round(lead_case.T / lead_case.h):,}"
     assert ["steps", steps, steps] in page.numbers()
     expect(page.page.locator("p.verdict")).to_contain_text("rk4 drifts, midpoint does not")
-    assert page.page.evaluate("[window.cosymp_bokeh_reads, window.cosymp_bokeh_layouts, window.cosymp_bokeh_sends]") \
-        == [True, True, True], "app/static/bokeh_reads.js, bokeh_layouts.js or bokeh_sends.js did not apply"
+    assert page.page.evaluate("[window.cosymp_bokeh_reads, window.cosymp_bokeh_built, window.cosymp_bokeh_layouts, "
+                              "window.cosymp_bokeh_sends]") == [True] * 4, \
+        "app/static/bokeh_reads.js, bokeh_layouts.js or bokeh_sends.js did not apply"
     page.page.wait_for_function("() => [...document.fonts].some((f) => f.family.replaceAll('\"', '') === "
                                 "'cosymp-KaTeX_Main' && f.status === 'loaded')", timeout=10_000)
     assert not page.page.evaluate("[...document.fonts].filter((f) => f.status === 'error').map((f) => f.family)")
@@ -472,4 +473,33 @@ def test_twenty_quick_key_presses_on_a_slider_reach_the_server_in_a_few_messages
     page.page.wait_for_function("(v) => Math.abs(JSON.parse(new URL(location.href).searchParams.get('p')).gamma - v) "
                                 "< 1e-9 * Math.abs(v)", arg=last, timeout=WAIT_MS)
     assert len(patches) - sent < 20, len(patches) - sent
+    page.check()
+
+
+SIZES_JS = """() => {
+  // Every shown element's size as its view holds it against the browser's layout of it.
+  const {UIElementView} = Bokeh.require("models/ui/ui_element");
+  const out = [];
+  for (const view of Bokeh.index.all_views()) {
+    if (view instanceof UIElementView && view.el.isConnected && view.el.offsetParent !== null) {
+      const r = view.el.getBoundingClientRect();
+      out.push([view.model.type, view.bbox.width, view.bbox.height, Math.floor(r.width), Math.floor(r.height)]);
+    }
+  }
+  return out;
+}"""
+
+
+def test_the_first_page_s_elements_hold_the_sizes_the_browser_gave_them(page):
+    """app/static/bokeh_reads.js reads the sizes of a root's elements together once it is built
+    (each element read its own as it was rendered): every shown element must still know its size,
+    and the toolbars their tools (a toolbar that read no size put every tool in its overflow menu)."""
+    page.open()
+    page.page.wait_for_selector(TABLE_ROW)
+    page.page.wait_for_timeout(1000)
+    sizes = page.page.evaluate(SIZES_JS)
+    assert len(sizes) > 50 and {"Figure", "Toolbar", "Slider"} <= {s[0] for s in sizes}
+    assert [s for s in sizes if (s[1], s[2]) != (s[3], s[4])] == []
+    assert page.page.evaluate("""() => [...Bokeh.index.all_views()].filter((v) => v.model.type === "Toolbar"
+        && v.shadow_el.querySelector('.bk-tool-overflow') !== null).length""") == 0
     page.check()

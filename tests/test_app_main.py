@@ -71,6 +71,10 @@ def test_the_bokeh_reads_shim_still_matches_bokehjs_and_no_css_sets_bk_variables
         "BokehJS no longer reads visuals through getComputedStyle: app/static/bokeh_reads.js may go"
     assert re.search(r"get base_font_size\(\) \{\s*const font_size = getComputedStyle\(this\.el\)\.fontSize;", js), \
         "BokehJS no longer reads a plot's font size through getComputedStyle: revisit app/static/bokeh_reads.js"
+    assert re.search(r"_after_render\(\) \{\s*this\.update_style\(\);\s*this\.update_bbox\(\);\s*\}", js), \
+        "BokehJS's elements no longer read their size as they render: revisit app/static/bokeh_reads.js"
+    assert re.search(r"build\(target\) \{\s*\(0, assert_1\.assert\)\(this\.is_root\);\s*this\.render_to\(target\);"
+                     r"\s*this\.r_after_render\(\);", js), "BokehJS builds a root otherwise: revisit app/static/bokeh_reads.js"
     root = Path(main.__file__).resolve().parent.parent
     sources = [*root.glob("assets/*.css"), *root.glob("app/**/*.py"), *root.glob("app/**/*.js")]
     assert sources and not [p for p in sources if re.search(r"--bk-[a-z]", p.read_text())], \
