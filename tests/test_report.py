@@ -93,6 +93,7 @@ def open_offline(path, shot, interact=False, js=None):
             plot.scroll_into_view_if_needed()
             box = plot.locator(".u-over").bounding_box()
             before = page.evaluate("[cosympPlots[1].scales.x.min, cosympPlots[1].scales.x.max]")
+            answers["values shown off the plot"] = plot.locator(".u-legend .u-value").nth(1).is_visible()
             page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
             answers["hover"] = plot.locator(".u-legend .u-value").nth(1).inner_text()
             page.mouse.move(box["x"] + 0.3 * box["width"], box["y"] + 0.3 * box["height"])
@@ -119,6 +120,7 @@ def test_scene_report_from_the_command_line(tmp_path):
     assert requests == [] and errors == []
     assert drawn == 7
     assert answers["hover"] not in ("", "–")
+    assert not answers["values shown off the plot"], "a legend's values read the cursor: no empty boxes without it"
     (x0, x1), (y0, y1) = answers["zoom"]
     assert x0 < y0 < y1 < x1
 

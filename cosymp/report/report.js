@@ -191,6 +191,12 @@
     for (var k = n - 1; k >= 0; k--) rows[rows.length - 1].parentNode.appendChild(rows[rows.length - n + k]);
   }
 
+  /* A live legend's values read the cursor's position: off the plot they would be empty boxes, so
+     they (and the x readout's row) are shown only while the cursor is over the data. */
+  function hovering(u) {
+    u.root.classList.toggle("u-hovering", u.cursor.left != null && u.cursor.left >= 0);
+  }
+
   var plots = window.cosympPlots = [];
   specs.forEach(function (spec) {
     var el = document.getElementById(spec.id);
@@ -218,7 +224,8 @@
       scales: {x: {time: false}, y: {range: padded}},
       axes: [axis(spec.xlabel, spec.logx, false), axis(spec.ylabel, spec.logy, true)],
       cursor: {drag: {x: true, y: true, uni: 20}},
-      legend: {live: !spec.parametric}
+      legend: {live: !spec.parametric},
+      hooks: {setCursor: [hovering]}
     }, data, el);
     legendInOrder(plot, drawn.length);
     plots.push(plot);
