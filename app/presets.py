@@ -8,11 +8,10 @@ in the one format the app writes: text as it is, numbers and the scene's paramet
 numbers with at most 10 significant digits.
 """
 import json
-import math
 from dataclasses import dataclass, field
 from urllib.parse import urlencode
 
-from cosymp.scenes import SCENES, cases, first
+from cosymp.scenes import cases, first
 
 URL_NAMES = {"scene": "scene", "method": "method", "other": "vs", "theta": "theta", "h": "h", "T": "T",
              "values": "p", "view": "view"}
@@ -48,15 +47,6 @@ def parse_items(query, names):
         except ValueError:
             bad.append(f"{u}={text[:40]}")
     return out, bad
-
-
-def long_horizon(scene, T):
-    """The Long run's default horizon: 100 times the study's horizon T, at most the paper's long
-    horizon for the scene (Scene.T_long). (The paper's own long runs open from their presets, with
-    their parameters: its damped run is at γ = 2e-4, and at the scene's γ = 0.2 a run to its 5e5
-    overflows at t ≈ 7000.)"""
-    T_long = SCENES[scene].T_long
-    return min(math.inf if T_long is None else T_long, 100.0 * T)
 
 
 PAPER, HARD = "Paper figures", "Hard cases"

@@ -17,8 +17,7 @@ from cosymp.report.style import pair_colors
 from cosymp.summary import long_drive
 
 from ..jobs import Job, Note
-from ..plotting import SLOTS, Pair, figure, grid, note, pane, series, swatch, zero_floor
-from ..presets import long_horizon
+from ..plotting import SLOTS, Curves, grid, note, swatch
 from ..study import DELTA
 from .base import Feature, FeatureView
 
@@ -47,6 +46,14 @@ def envelopes(series_):
     return {x.label: {**x.arrays(), "failure": x.failure, "method": x.method} for x in series_}
 
 
+def default_horizon(study):
+    """The scene's long horizon for the study (Scene.long_horizon), rounded up to two significant
+    digits: a number to read in its box."""
+    T = study.scene_obj.long_horizon(study.T, study.values)
+    step = 10.0 ** (math.floor(math.log10(T)) - 1)
+    return float(f"{math.ceil(T / step - 1e-9) * step:.2g}")
+
+
 def _chunk(drives, n, i):
     return drives[i].advance(n)
 
@@ -65,7 +72,7 @@ class LongRun(Job):
     KEEP = 4  # the envelopes are up to 2.2 MB a run
 
     def __init__(self, study, **params):
-        params.setdefault("T_long", long_horizon(study.scene, study.T))
+        params.setdefault("T_long", default_horizon(study))
         super().__init__(study=study, **params)
         self._said = set()
         self._steps_done = 0
@@ -75,7 +82,7 @@ class LongRun(Job):
         """Another scene: the run under way stops and the old scene's data goes (the view starts a
         run of the new one when its tab is shown: `wanted`)."""
         self.discard()
-        self.param.update(data={}, setting="", T_long=long_horizon(self.study.scene, self.study.T))
+        self.param.update(data={}, setting="", T_long=default_horizon(self.study))
 
     def say(self, note_):
         self.study.say(note_)
@@ -224,7 +231,7 @@ class LongRunView(FeatureView):
                                           width=260, bar_color="primary", margin=(22, 10))
         status = pn.bind(lambda s, st: f"<p class='doc'>{html.escape(s)}<br><b>{html.escape(st)}</b></p>",
                          lr.param.setting, lr.param.status)
-        self.plots = {k: Pair(figure(title, "t", label, logy=log)) for k, (title, label, log, _) in PLOTS.items()}
+        self.plots = {k: Curves(title, "t", label, log=log) for k, (title, label, log, _) in PLOTS.items()}
         self.key = note("")
         self.follow(lr, "data")
         return pn.Column(
@@ -233,7 +240,7 @@ class LongRunView(FeatureView):
                  "arrive; the page stays usable meanwhile.</p>"),
             pn.Row(pn.widgets.FloatInput.from_param(lr.param.T_long, width=180), start, cancel, progress),
             note(status), self.key,
-            grid(*[pane(p.fig) for p in self.plots.values()]),
+            grid(*[c.panel for c in self.plots.values()]),
             sizing_mode="stretch_width")
 
     def wanted(self):
@@ -243,11 +250,9 @@ class LongRunView(FeatureView):
     def update(self):
         data = self.state.data
         methods = [d["method"] for d in data.values()] + ["", ""]
-        for key, p in self.plots.items():
-            p.colors(methods[:2])
-            bands = {slot: band(d, PLOTS[key][3]) for slot, d in zip(SLOTS, data.values()) if len(d["t"])}
-            floor = zero_floor([y for _, y in bands.values()]) if PLOTS[key][2] else None
-            p.set({slot: series(t, y, logy=PLOTS[key][2], floor=floor) for slot, (t, y) in bands.items()})
+        for key, curves in self.plots.items():
+            curves.show({slot: band(d, PLOTS[key][3]) for slot, d in zip(SLOTS, data.values()) if len(d["t"])},
+                        methods[:2])
         self.key.object = long_key(data)
 
 

@@ -153,7 +153,9 @@ class Scene:
     Declarations: `rank`, where the registry lists it (by rank, then name: the app's menu, the
     reports, the tests); `paper` (Paper, or None); `cases` (Case tuple); `map_axes`, the Stability
     map's first axes ((name, start, stop, log) for x and y; None: h around the scene's step by
-    its first parameter) and `map_measure`, the measure it opens on. Hooks of a scene with
+    its first parameter) and `map_measure`, the measure it opens on; `still_after(P)`, for a scene
+    whose Hamiltonian dies out, the time after which its flow no longer moves a state visibly (the
+    long run's horizon ends there: beyond it every method's figures are flat). Hooks of a scene with
     gauges: `gauges` ({name: gauge}, the values of its 'gauge' parameter), `mechanical(P, t, q,
     p)`, the gauge-invariant momentum, `gauge_map(P, t, q, p, pt, inverse=False)`, the map
     G_chi from the original gauge to the one in P, and `gauge_jacobian(P_from, P_to, t)`, the
@@ -177,6 +179,7 @@ class Scene:
     cases: tuple = ()
     map_axes: tuple = None
     map_measure: str = "growth"
+    still_after: Callable = None
     gauges: dict = None
     mechanical: Callable = None
     gauge_map: Callable = None
@@ -215,6 +218,14 @@ class Scene:
         """The mechanical momentum of states (q, p) at times t where the scene defines one
         (charged: p - e A), else None."""
         return None if self.mechanical is None else self.mechanical(P, t, q, p)
+
+    def long_horizon(self, T, values=None):
+        """The long run's horizon for a study to T: 100 T, at most the paper's long horizon
+        (T_long) and, but never below T, the time after which the flow is still (`still_after`)."""
+        horizon = min(math.inf if self.T_long is None else self.T_long, 100.0 * T)
+        if self.still_after is not None:
+            horizon = min(horizon, max(T, self.still_after(self.pack(self.values(values)))))
+        return horizon
 
     def needs_scaling(self, P, t_max):
         """Whether a run reaching |t| = t_max needs the scaled steps (decided per run, before it starts)."""

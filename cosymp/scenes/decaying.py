@@ -1,4 +1,5 @@
 """The paper's opening example: H = e^{-lam t} (p^2 + q^2) / 2 (lam = 1 in the paper)."""
+import math
 from collections import namedtuple
 
 import numpy as np
@@ -44,6 +45,11 @@ def drift(P, t0, tau, z):
     return 0.5 * p2 * P.lam * clock
 
 
+def still_after(P):
+    """The flow left after t rotates by e^(−λt)/λ in all: from where that is 1e-3 rad on, nothing moves visibly."""
+    return math.log(1e3 / P.lam) / P.lam
+
+
 SCENE = Scene(
     name="decaying",
     title="Opening example: oscillator with decaying Hamiltonian",
@@ -67,6 +73,7 @@ SCENE = Scene(
     h=0.1,
     T=10.0,
     time_scale=1.0,
+    still_after=still_after,
     notes=("The paper fixes lambda = 1; a small lambda approaches the plain harmonic oscillator.",),
     cases=(
         Case("The opening example, decaying slowly",
