@@ -10,7 +10,7 @@ from functools import cache
 import numpy as np
 
 from .errors import InputError, as_number, quoted
-from .kernels.families import Boris, Composition, Exact, Explicit, Gauss, Splitting, Theta
+from .kernels.families import Boris, Composition, Exact, Explicit, Gauss, Perturbed, Splitting, Theta
 from .kernels.registry import FAMILIES
 from .kernels.stack import MAX_OFFSETS, MAX_STAGES
 
@@ -129,6 +129,17 @@ SRKN11B = ([0.123229775946271, 0.290553797799558, -0.127049212625417, -0.2463317
             0.198128671918067, 0.0414649985182624])
 
 
+# Blanes, Casas, Farres, Laskar, Makazaga & Murua, Appl. Numer. Math. 68 (2013) 58-72: ABA864, the
+# symmetric splitting A B A ... A of generalized order (8, 6, 4) for H = A + eps B: its error is
+# O(eps h^8 + eps^2 h^6 + eps^3 h^4). As (drifts a: the flows of A, kicks b: of eps B), kick b[i]
+# then drift a[i], the first kick empty.
+_ABA864_A = [0.0711334264982231177779387300061549964174, 0.241153427956640098736487795326289649618,
+             0.521411761772814789212136078067994229991, -0.333698616227678005726562603400438876027]
+_ABA864_B = [0.183083687472197221961703757166430291072, 0.310782859898574869507522291054262796375,
+             -0.0265646185119588006972121379164987592663, 0.0653961422823734184559721793911134363710]
+ABA864 = ([*_ABA864_A, *_ABA864_A[::-1]], [0.0, *_ABA864_B, *_ABA864_B[-2::-1]])
+
+
 def _mirrored(half, middle):
     """The coefficients of a symmetric composition from its first half and its middle one."""
     return [*half, middle, *half[::-1]]
@@ -213,6 +224,9 @@ class Method:
         if self.requires == "separable" and not scene.separable:
             return (f"method '{self.name}' splits H = T(p, t) + V(q, t) and scene '{scene.name}' is not "
                     f"separable: use it on {', '.join(_with('separable'))}")
+        if self.requires == "integrable" and not scene.near_integrable:
+            return (f"method '{self.name}' splits H = H0 + (H - H0), H0's flow in closed form and H - H0 small, and "
+                    f"scene '{scene.name}' declares no such H0: use it on {', '.join(_with('near_integrable'))}")
         if self.requires == "flow" and not scene.has_flow:
             return (f"method '{self.name}' needs a closed-form flow and scene '{scene.name}' has none: "
                     f"use it on {', '.join(_with('has_flow'))}")
@@ -297,6 +311,11 @@ METHODS = {m.name: m for m in (
     Method("mclachlan8", "McLachlan 8 (15 leapfrogs)", "McLachlan's optimised symmetric composition of 15 "
            "leapfrog steps (1995), order 8: 15 forces per step", 8, "symplectic",
            lambda: compose(LEAPFROG, MCLACHLAN8), requires="separable"),
+    Method("aba864", "ABA864 (near-integrable splitting)", "Blanes, Casas, Farres, Laskar, Makazaga & "
+           "Murua's splitting (2013) of H = H0 + (H - H0): 8 exact flows of H0 (the unperturbed oscillator "
+           "and t), 7 kicks of the small H - H0 per step; order 4, error O(eps h^8 + eps^2 h^6 + eps^3 h^4) "
+           "for a perturbation of size eps", 4, "symplectic",
+           lambda: Perturbed(*_splitting(*ABA864)), requires="integrable"),
     Method("exact", "Exact flow", "the scene's closed-form flow", 0, "exact",
            lambda: Exact(_floats([0.0, 1.0])), requires="flow"),
 )}

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from cosymp.kernels.families import Boris, Composition, Exact, Explicit, Gauss, Splitting, Theta
+from cosymp.kernels.families import Boris, Composition, Exact, Explicit, Gauss, Perturbed, Splitting, Theta
 from cosymp.methods import METHODS
 
 TOL = 1e-14
@@ -94,6 +94,7 @@ def fixed_offsets(expected):
 
 
 CHECKS = {Explicit: explicit, Gauss: gauss, Composition: composition, Theta: theta_family, Splitting: splitting,
+          Perturbed: splitting,
           Boris: fixed_offsets((0.0, 0.5, 1.0)), Exact: fixed_offsets((0.0, 1.0))}
 
 

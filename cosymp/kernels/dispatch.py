@@ -138,6 +138,10 @@ kick = _dispatched("kick", 5, "Exact flow of V(q, t) for a time tau at row j's t
                    "kick(P, C, j, tau, z) -> p_t increment")
 drift = _dispatched("drift", 4, "Exact flow of T(p, t) + p_t from t0 for a time tau (separable scenes): "
                     "drift(P, t0, tau, z) -> p_t increment")
+rotate = _dispatched("rotate", 4, "Exact flow of the integrable part H0 + p_t from t0 for a time tau (near-integrable "
+                     "scenes, H = H0 + (H - H0) with H - H0 small): rotate(P, t0, tau, z) -> p_t increment")
+nudge = _dispatched("nudge", 5, "Exact flow of the perturbation H - H0 for a time tau at row j's time (near-integrable "
+                    "scenes): nudge(P, C, j, tau, z) -> p_t increment")
 scaling = _dispatched("scaling", 2, "Scaling exponent e of the step from t (see scenes.base.SceneKernel): "
                       "scaling(P, t) -> e")
 shift = _dispatched("shift", 2, "Time shift tau of the scaling exponent e: shift(P, e) -> tau")

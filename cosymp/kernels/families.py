@@ -30,6 +30,8 @@ from .dispatch import (
     kick,
     ncoef,
     ndof,
+    nudge,
+    rotate,
     vecpot,
 )
 from .linalg import solve
@@ -58,6 +60,10 @@ Splitting = namedtuple("Splitting", "a b kick offsets")
 Splitting.__doc__ = ("Explicit splitting of a separable H = T(p, t) + V(q, t), t carried by T: for each i, the "
                      "kick b[i] h (the exact flow of V at the time offsets[kick[i]]; skipped where b[i] = 0), "
                      "then the drift a[i] h (the exact flow of T + p_t).")
+Perturbed = namedtuple("Perturbed", "a b kick offsets")
+Perturbed.__doc__ = ("Explicit splitting of a near-integrable H = H0 + (H - H0), H0 with a closed-form flow and "
+                     "H - H0 small: as Splitting, the kick b[i] h being the flow of H - H0 (nudge) and the drift "
+                     "a[i] h the flow of H0 + p_t (rotate).")
 
 
 @njit(**INLINE)
@@ -340,5 +346,21 @@ def splitting_step(D, P, C, t, h, z, pt, W):
             dpt += kick(P, C, D.kick[i], D.b[i] * h, z)
         if D.a[i] != 0.0:
             dpt += drift(P, t + c * h, D.a[i] * h, z)
+            c += D.a[i]
+    return OK, pt + dpt
+
+
+@njit(**INLINE)
+def perturbed_step(D, P, C, t, h, z, pt, W):
+    """As splitting_step, with the flows of the near-integrable split: H0 + p_t (closed form: the
+    unperturbed motion, t moving) and the small H - H0 (q and t staying)."""
+    dpt = 0.0 * pt
+    c = 0.0
+    for i in range(len(D.b)):
+        if D.b[i] != 0.0:
+            row(D, P, C, D.kick[i])
+            dpt += nudge(P, C, D.kick[i], D.b[i] * h, z)
+        if D.a[i] != 0.0:
+            dpt += rotate(P, t + c * h, D.a[i] * h, z)
             c += D.a[i]
     return OK, pt + dpt

@@ -7,8 +7,8 @@ scenes.quadratic) and applied to every member of an ensemble. M is also the exac
 """
 from numba import njit
 
-from .dispatch import INLINE, IR_INLINE, flow, ndof
-from .families import boris_core, splitting_step
+from .dispatch import INLINE, IR_INLINE, flow, ndof, step
+from .families import boris_core
 from .linalg import solve
 from .stack import matrices, stage_matrices, stage_square, vectors
 
@@ -273,17 +273,18 @@ def splitting_lwork(D, P):
 
 @njit(**INLINE)
 def splitting_lmatrix(D, P, C, t, h, M, Q, W):
-    """M's columns are the steps of the unit vectors; the p_t increment -(z.Q z/2 + s), a
-    quadratic form plus a constant, is read off at 0, at each e_c and at each e_c + e_r."""
+    """Any splitting family's step (Splitting, Perturbed) as a matrix: M's columns are the steps of
+    the unit vectors; the p_t increment -(z.Q z/2 + s), a quadratic form plus a constant, is read
+    off at 0, at each e_c and at each e_c + e_r."""
     v = W[0]
     m = 2 * ndof(P)
     for r in range(m):
         v[r] = 0.0
-    d0 = splitting_step(D, P, C, t, h, v, 0.0, W)[1]
+    d0 = step(D, P, C, t, h, v, 0.0, W)[1]
     for c in range(m):
         for r in range(m):
             v[r] = 1.0 if r == c else 0.0
-        d = splitting_step(D, P, C, t, h, v, 0.0, W)[1]
+        d = step(D, P, C, t, h, v, 0.0, W)[1]
         for r in range(m):
             M[r, c] = v[r]
         Q[c, c] = -2.0 * (d - d0)
@@ -291,6 +292,6 @@ def splitting_lmatrix(D, P, C, t, h, M, Q, W):
         for r in range(c + 1, m):
             for i in range(m):
                 v[i] = 1.0 if i == c or i == r else 0.0
-            d = splitting_step(D, P, C, t, h, v, 0.0, W)[1]
+            d = step(D, P, C, t, h, v, 0.0, W)[1]
             Q[c, r] = Q[r, c] = -(d - d0) - 0.5 * (Q[c, c] + Q[r, r])
     return -d0

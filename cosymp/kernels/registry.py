@@ -52,6 +52,9 @@ FAMILIES = {
     f.Splitting: FamilyKernel(f.splitting_step, f.splitting_work, lin.splitting_lmatrix, lin.splitting_lwork,
                               lambda D, linear: float(np.count_nonzero(D.b)),  # one force (grad V) per kick
                               lambda D: None, True),
+    f.Perturbed: FamilyKernel(f.perturbed_step, f.splitting_work, lin.splitting_lmatrix, lin.splitting_lwork,
+                              lambda D, linear: float(np.count_nonzero(D.b)),  # one force of H - H0 per kick
+                              lambda D: None, True),
 }
 for _cls, _kernel in FAMILIES.items():
     register(_cls, _kernel)

@@ -138,6 +138,9 @@
         var x = u.valToPos(xs[i], "x", true), y = u.valToPos(ys[i], "y", true);
         if (shape === "plus") {
           p.moveTo(x - r, y); p.lineTo(x + r, y); p.moveTo(x, y - r); p.lineTo(x, y + r);
+        } else if (shape === "x") {
+          var d = r * Math.SQRT1_2;
+          p.moveTo(x - d, y - d); p.lineTo(x + d, y + d); p.moveTo(x - d, y + d); p.lineTo(x + d, y - d);
         } else if (!poly) {
           p.moveTo(x + r, y); p.arc(x, y, r, 0, 2 * Math.PI);
         } else {
@@ -149,7 +152,7 @@
           }
         }
       }
-      return {stroke: p, fill: shape === "plus" ? null : p, clip: null, flags: 3};
+      return {stroke: p, fill: shape === "plus" || shape === "x" ? null : p, clip: null, flags: 3};
     };
   }
 

@@ -18,7 +18,7 @@ METHOD_COLORS = {
     "gauss4": "#386000", "gauss6": "#00c030", "composition4": "#6800d8", "composition6": "#f008e0",
     "boris": "#a09000", "euler": "#f88000", "rk4": "#e03131", "rk8": "#803000", "leapfrog": "#c0b000",
     "yoshida4": "#689070", "yoshida6": "#f890a8", "blanes-moan4": "#800030", "blanes-moan6": "#886810",
-    "mclachlan8": "#805888",
+    "mclachlan8": "#805888", "aba864": "#005850",
     "exact": "#212529", "scipy-RK45": "#6c6c6c", "scipy-DOP853": "#000000", "scipy-LSODA": "#b0b0b0",
 }
 MIN_DISTANCE = 21
@@ -27,11 +27,12 @@ four pairs of the previous palette that read alike in a work-precision plot were
 (gauss4 and boris, composition4 and blanes-moan6, rk4 and composition6, symplectic-euler and
 leapfrog); a search of the colours visible on white (L* 25 to 72) found no 19 that all keep more
 than about 23. With mclachlan8 no colour kept 21 from all the others: the splittings' six were
-searched again together (coordinate descent over that grid), moving the five older ones slightly."""
+searched again together (coordinate descent over that grid), moving the five older ones slightly.
+aba864 (modulated only) took the grid's colour farthest from the others of that scene: 22.7."""
 OTHER = "#343a40"
 """The colour of a second curve whose method has the same colour as the first (drawn dashed)."""
 FAMILY_MARKERS = {"Explicit": "triangle", "Theta": "circle", "Gauss": "diamond", "Composition": "inverted_triangle",
-                  "Splitting": "hex", "Boris": "star", "Exact": "plus", "scipy": "square"}
+                  "Splitting": "hex", "Perturbed": "x", "Boris": "star", "Exact": "plus", "scipy": "square"}
 """The marker of each family of methods (the kernel family a method's data belongs to, and scipy's
 solvers), as Bokeh names them; the reports draw the same shapes."""
 GAUGE_COLORS = {"original": "#212529", "coulomb": "#1864ab", "symmetric": "#2b8a3e", "landau": "#e8590c",

@@ -76,6 +76,11 @@ class SceneKernel:
     compose, each returning its p_t increment: kick(P, C, j, tau, z), the flow of V for a time tau
     at the time of row j (p moves), and drift(P, t0, tau, z), the flow of T + p_t from t0 to
     t0 + tau (q and t move).
+
+    A near-integrable scene, H = H0 + (H - H0) with H0's flow in closed form and H - H0 small,
+    gives the flows the near-integrable splittings compose: rotate(P, t0, tau, z), the flow of
+    H0 + p_t from t0 to t0 + tau, and nudge(P, C, j, tau, z), the flow of H - H0 for a time tau at
+    the time of row j, each returning its p_t increment.
     """
 
     ndof: int
@@ -94,6 +99,8 @@ class SceneKernel:
     shift: Callable = unshifted
     kick: Callable = None
     drift: Callable = None
+    rotate: Callable = None
+    nudge: Callable = None
     scaled_beyond: Callable = None
 
 
@@ -159,7 +166,10 @@ class Scene:
     gauges: `gauges` ({name: gauge}, the values of its 'gauge' parameter), `mechanical(P, t, q,
     p)`, the gauge-invariant momentum, `gauge_map(P, t, q, p, pt, inverse=False)`, the map
     G_chi from the original gauge to the one in P, and `gauge_jacobian(P_from, P_to, t)`, the
-    Jacobian in z of the change of gauge G_to o G_from^-1 at times t.
+    Jacobian in z of the change of gauge G_to o G_from^-1 at times t. A near-integrable scene
+    (kernel.rotate) declares `strong`: values at which H - H0 is as large as H0, where the
+    near-integrable splittings show their order in h alone (their error is a series in the size
+    of H - H0 as well).
     """
 
     name: str
@@ -184,6 +194,7 @@ class Scene:
     mechanical: Callable = None
     gauge_map: Callable = None
     gauge_jacobian: Callable = None
+    strong: dict = None
     rank: int = 100
 
     def __post_init__(self):
@@ -204,6 +215,10 @@ class Scene:
     @property
     def separable(self):
         return self.kernel.kick is not None
+
+    @property
+    def near_integrable(self):
+        return self.kernel.rotate is not None
 
     @property
     def has_gauges(self):

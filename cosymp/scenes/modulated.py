@@ -20,6 +20,25 @@ def coef(P, t, C, r):
     quadratic.finish(P, C, r)
 
 
+@njit(**INLINE)
+def rotate(P, t0, tau, z):
+    """The flow of H0 + p_t, H0 = (q² + p²)/2 (the unmodulated oscillator): (q, p) turn by the angle
+    tau, t moves by tau; p_t stays (H0 does not depend on t)."""
+    c, s = np.cos(tau), np.sin(tau)
+    q, p = z[0], z[1]
+    z[0] = c * q + s * p
+    z[1] = c * p - s * q
+    return 0.0 * q
+
+
+@njit(**INLINE)
+def nudge(P, C, r, tau, z):
+    """The flow of H - H0 = ε sin(αt) q²/2 for a time tau at row r's time: p -= tau ε sin(αt) q;
+    returns p_t's increment -tau ε α cos(αt) q²/2."""
+    z[1] -= tau * (quadratic.get_S(P, C, r, 0, 0) - 1.0) * z[0]
+    return -0.5 * tau * quadratic.get_dS(P, C, r, 0, 0) * z[0] * z[0]
+
+
 SCENE = Scene(
     name="modulated",
     title="Oscillator with time-dependent potential",
@@ -39,7 +58,7 @@ SCENE = Scene(
     ),
     kernel=SceneKernel(ndof=1, ncoef=quadratic.ncoef(1), linear=True, coef=coef,
                        energy=quadratic.energy, grad=quadratic.grad, hess=quadratic.hess,
-                       dhdt=quadratic.dhdt, kick=quadratic.kick, drift=free_drift),
+                       dhdt=quadratic.dhdt, kick=quadratic.kick, drift=free_drift, rotate=rotate, nudge=nudge),
     Params=ModulatedParams,
     h=0.1,
     T=50.0,
@@ -83,5 +102,6 @@ SCENE = Scene(
              "midpoint", "rk4", 0.1, 50.0, view="long", T_long=1e6, hard=True),
     ),
     map_axes=(("alpha", 0.5, 4.5, False), ("eps", 0.0, 0.8, False)),
+    strong={"eps": 0.5, "alpha": 2.0},
     rank=3,
 )

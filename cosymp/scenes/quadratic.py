@@ -20,6 +20,19 @@ def put_S(P, C, r, i, j, value):
 
 
 @njit(**INLINE)
+def get_S(P, C, r, i, j):
+    """S[i, j] of row r."""
+    return C[r, i * 2 * ndof(P) + j]
+
+
+@njit(**INLINE)
+def get_dS(P, C, r, i, j):
+    """dS/dt[i, j] of row r."""
+    m = 2 * ndof(P)
+    return C[r, m * m + i * m + j]
+
+
+@njit(**INLINE)
 def put_dS(P, C, r, i, j, value):
     """dS/dt[i, j] = value in row r."""
     m = 2 * ndof(P)
