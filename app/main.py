@@ -139,6 +139,7 @@ class App(param.Parameterized):
             if state is not None:
                 state.release()
         self.study.release()
+        Collector.request()
 
     def _on_message(self, event):
         if event.new is not None:

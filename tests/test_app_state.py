@@ -843,11 +843,13 @@ def test_a_freed_app_gives_memory_back_then_is_logged_after_its_collection(monke
 def test_full_collections_wait_for_the_idle_server_unless_overdue(monkeypatch):
     """memory.Collector: on a running loop, Python's automatic full collections are off (its
     generation-2 threshold out of reach) and the task collects once enough generation-1
-    collections have come and the server is idle, or once they are overdue whatever the activity;
+    collections have come and the server is idle, or once they are overdue whatever the activity,
+    or, once idle, after a stopped page asked for one (however few came: its state is garbage);
     without a loop nothing changes."""
     import asyncio
 
     monkeypatch.setattr(memory.Collector, "task", None)
+    monkeypatch.setattr(memory.Collector, "requested", False)
     monkeypatch.setattr(memory, "COLLECT_CHECK_S", 0.0)
     before = gc.get_threshold()
     monkeypatch.setattr(gc, "set_threshold", lambda *t: thresholds.append(t))
@@ -870,11 +872,20 @@ def test_full_collections_wait_for_the_idle_server_unless_overdue(monkeypatch):
             younger[0], idle[0] = count, is_idle
             for _ in range(3):
                 await asyncio.sleep(0)
+        younger[0], idle[0] = 1, False
+        memory.Collector.request()
+        for _ in range(3):
+            await asyncio.sleep(0)
+        assert full[-1] != 1, "a requested collection waits for the idle server"
+        idle[0] = True
+        for _ in range(3):
+            await asyncio.sleep(0)
+        assert full.count(1) == 1 and not memory.Collector.requested, "requested: one collection, once idle"
         task.cancel()
 
     asyncio.run(served())
     assert thresholds == [(before[0], before[1], memory.NEVER)]
-    assert full and set(full) == {memory.COLLECT_DUE, memory.COLLECT_FORCED}, full
+    assert full and set(full) == {1, memory.COLLECT_DUE, memory.COLLECT_FORCED}, full
 
 
 def test_a_long_run_whose_page_closed_stops_and_publishes_nothing_more(monkeypatch):
