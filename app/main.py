@@ -28,6 +28,14 @@ from .warmup import prepare
 ASSETS = Path(__file__).resolve().parent.parent / "assets"
 NOTIFY_MS = {"error": 8000, "warning": 6000, "info": 4000}
 AHEAD_MS = 50  # one step of building tabs ahead at most this often (App._ahead)
+AHEAD_WAIT_MS = 2000  # the next step after this long if the page has not said it is idle
+# The page says it has drawn an ahead step when its main thread is next idle (after the step's
+# models got their views): an odd `value` is a step sent, value + 1 the page's answer.
+PACE_JS = """
+const sent = cb_obj.value;
+if (sent % 2 === 1)
+  requestAnimationFrame(() => requestIdleCallback(() => { cb_obj.value = sent + 1 }, {timeout: 1000}));
+"""
 AHEAD_IDLE_S = 1.0  # after the last change in any page of the server
 GONE_MS = 1000  # a page whose browser has gone this long stops (App._watch)
 DISCARDING = set()  # the tasks discarding closed pages' sessions (App._discard)
@@ -93,6 +101,10 @@ class App(param.Parameterized):
                 self.states[f.name].param.watch(lambda e: self._write_url(), list(f.url))
         self._ahead_done = set()
         self._ahead_steps = self._ahead_work()
+        self.pace = pn.widgets.IntInput(value=0, visible=False)
+        self._sent = -1  # the last step's odd number (`_ahead`)
+        self.pace.jscallback(value=PACE_JS)
+        self.pace.param.watch(self._paced, "value")
         self.study.param.watch(Activity.touch, [*Study.INPUTS, "view"])
         pn.state.onload(self._flush)
         pn.state.on_session_destroyed(self._stop)
@@ -231,8 +243,23 @@ class App(param.Parameterized):
             step = next(self._ahead_steps, None)
             if step is None:
                 return
-            push(step)
+            self._sent += 2
+            sent = self._sent
+            push(lambda: (step(), self.pace.param.update(value=sent)))
+            if self._served():
+                self._doc.add_timeout_callback(lambda: self._sent == sent and self._next_ahead(), AHEAD_WAIT_MS)
+            return
         self._next_ahead()
+
+    def _paced(self, event):
+        """The page has drawn the last step built ahead and is idle: the next one AHEAD_MS later, a gap in
+        which a change made on the page goes out at once (`_ahead`; with no gap the first scene change
+        of a page took 589 and 836 ms in one run, with it 249 and 264). Steps
+        went every AHEAD_MS regardless, and the browser took 150-280 ms to give each step's
+        models their views: the messages queued in the page, and a change made in the first seconds
+        waited behind them (the first scene change 470-520 ms against 160-230 later)."""
+        if event.new == self._sent + 1:
+            self._next_ahead()
 
     def _ahead_work(self):
         """The steps of building ahead, 10-90 ms each, per feature with `ahead`: its layout built,
@@ -254,8 +281,11 @@ class App(param.Parameterized):
         session = getattr(context, "session", None)
         return session is not None and session.connection_count == 0
 
+    def _served(self):
+        return self._doc is not None and self._doc.session_context is not None  # no idle time otherwise
+
     def _next_ahead(self):
-        if self._doc is not None and self._doc.session_context is not None:  # served: no idle time otherwise
+        if self._served():
             self._doc.add_timeout_callback(self._ahead, AHEAD_MS)
 
     def _report(self):
@@ -283,7 +313,7 @@ class App(param.Parameterized):
             title="cosymp: structure-preserving integrators for time-dependent Hamiltonians",
             logo=str(ASSETS / "logo.svg"), favicon=str(ASSETS / "logo.svg"), header_background="#0b3d91",
             sidebar_width=360, design=Design, busy_indicator=None,
-            sidebar=[Controls(study=self.study), rule(), PresetLinks(), share, download],
+            sidebar=[Controls(study=self.study), rule(), PresetLinks(), share, download, self.pace],
             main=[pn.Row(SceneInfo(study=self.study), spinner, sizing_mode="stretch_width"), self.tabs],
         )
 

@@ -408,6 +408,34 @@ def test_a_page_that_closes_while_written_to_leaves_no_traceback_and_other_failu
             "Panel no longer leaves a closed page's writes unretrieved: drop app/page.closed_writes_seen"
 
 
+def test_a_step_built_ahead_waits_for_the_page_to_have_drawn_the_last(monkeypatch):
+    """Steps went every AHEAD_MS while the browser took 150-280 ms to draw each: they queued in the page,
+    and a change made meanwhile waited behind them. Now a step's message carries an odd number the page
+    answers with number + 1 once idle (PACE_JS), and the next step comes only then, or AHEAD_WAIT_MS
+    after the step if no answer came; a late answer to an older step starts nothing."""
+    app = main.App()
+    later = []
+    app._doc = types.SimpleNamespace(session_context=types.SimpleNamespace(session=types.SimpleNamespace(
+        connection_count=1)), add_timeout_callback=lambda f, ms: later.append((f, ms)))
+    page.Activity.last -= main.AHEAD_IDLE_S
+    app._ahead()
+    assert app._ahead_done == {"compare"} and app.pace.value % 2 == 1
+    [(fallback, ms)] = later
+    assert ms == main.AHEAD_WAIT_MS, "no next step before the page answers"
+    sent = app.pace.value
+    app.pace.value = sent + 1  # the page's answer
+    assert later[1:] == [(app._ahead, main.AHEAD_MS)]
+    later[1][0]()
+    assert app.pace.value == sent + 2 and len(later) == 3, "the next step, waiting for its answer"
+    fallback()
+    app.pace.value = sent + 1  # a late answer to the first step
+    assert len(later) == 3, "nothing started by the first step's fallback or its late answer"
+    later[2][0]()
+    assert len(later) == 4 and later[3][0] == app._ahead, "no answer: the next step AHEAD_WAIT_MS later"
+    assert "requestIdleCallback" in main.PACE_JS and "sent + 1" in main.PACE_JS
+    app._stop(None)
+
+
 def test_tabs_are_built_ahead_one_at_a_time_while_the_page_is_idle_and_start_no_measurement(monkeypatch):
     """App._ahead takes one more step of building the tabs per call (a layout, its joining the page,
     its data drawn), hidden, once the server (every page) has been idle
