@@ -27,7 +27,7 @@ from .warmup import prepare
 
 ASSETS = Path(__file__).resolve().parent.parent / "assets"
 NOTIFY_MS = {"error": 8000, "warning": 6000, "info": 4000}
-AHEAD_MS = 50  # one step of building tabs ahead at most this often (App._ahead)
+AHEAD_MS = 50  # from the page's answer (or a look at a busy server) to the next step built ahead (App._ahead)
 AHEAD_WAIT_MS = 2000  # the next step after this long if the page has not said it is idle
 # The page says it has drawn an ahead step when its main thread is next idle (after the step's
 # models got their views): an odd `value` is a step sent, value + 1 the page's answer.
@@ -230,12 +230,12 @@ class App(param.Parameterized):
         """Build the tabs ahead of their first showing, hidden, while the server is idle (no change
         in any page for AHEAD_IDLE_S, nothing computing in this one): a first visit then shows it at
         once (it cost 0.5-1.8 s to build there, most of it the browser's), at the price of the
-        server's idle time and the page's memory. One step every AHEAD_MS (`_ahead_work`): a change
-        that comes while one runs waits for that step only (a whole tab at once took the server
-        0.3-0.45 s, and a scene change made in the first seconds of a page waited 0.6 s). With
-        Bokeh's properties memoized (app/properties.py) steps take 10-90 ms, and every tab is built
-        about 2 s after the page is drawn (at 0.1 s between steps and with a spare session's build
-        counted as a page's change, 4 s: a tab clicked 3 s after the page was often not built)."""
+        server's idle time and the page's memory. One step at a time (`_ahead_work`), the next when
+        the page has drawn it (`_paced`): a change that comes while one runs waits for that step only
+        (a whole tab at once took the server 0.3-0.45 s, and a scene change made in the first seconds
+        of a page waited 0.6 s). With Bokeh's properties memoized (app/properties.py) steps take
+        10-90 ms of the server's time and 150-280 ms of the browser's, and every tab is built about
+        6 s after the page is drawn."""
         if self._stopped or self._closed():
             return
         busy = any(j.running for j in self.jobs)
