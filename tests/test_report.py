@@ -276,7 +276,8 @@ def test_the_paper_reports_kernels_are_compiled_ahead(monkeypatch):
     monkeypatch.setattr(Setup, "make", classmethod(recording))
     paper_report(long=False, work_precision=False)
     for name in ("damped", "modulated"):
-        wp.measure(name, WP_METHODS, T=1.0, hs=[0.5], peers=True, rtols=[1e-3], budget=0.0)
+        applies = [m for m in WP_METHODS if METHODS[m].refusal(SCENES[name]) is None]  # as the report's
+        wp.measure(name, applies, T=1.0, hs=[0.5], peers=True, rtols=[1e-3], budget=0.0)
     ahead = {k for scene, methods in kernels().items() for k in warm.unit_keys(scene, methods)}
     assert made <= ahead, made - ahead
     assert {k for scene, methods in kernels(work_precision=False).items() for k in warm.unit_keys(scene, methods)} < ahead

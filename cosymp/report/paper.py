@@ -21,7 +21,7 @@ SCHEME = "symplectic-euler"
 REFERENCE = "rk4"
 DELTA = 1e-4
 LONG_BINS = 2000
-WP_METHODS = ("rk4", "rk8", "midpoint", "symplectic-euler", "gauss4", "gauss6", "leapfrog", "blanes-moan6")
+WP_METHODS = ("rk4", "rk8", "midpoint", "symplectic-euler", "gauss4", "gauss6", "leapfrog", "blanes-moan6", "aba864")
 GAUGE_QUANTITIES = (("x", "q", 0), ("y", "q", 1), ("p_x", "p", 0), ("p_y", "p", 1), ("Π_x", "Pi", 0), ("Π_y", "Pi", 1))
 
 
@@ -232,8 +232,8 @@ def _work_precision(name, progress):
                series("error"), logx=True, logy=True, parametric=True,
                caption="Each line joins one solver's runs in order of step size or tolerance. Markers by family: "
                        "triangles the Runge–Kutta methods, circles the θ-methods (midpoint, symplectic Euler), "
-                       "diamonds Gauss–Legendre, hexagons the splittings (leapfrog, Blanes–Moan), squares scipy's "
-                       "solvers (dashed)."),
+                       "diamonds Gauss–Legendre, hexagons the splittings (leapfrog, Blanes–Moan), crosses the "
+                       "near-integrable splitting (aba864, where H0's flow is known), squares scipy's solvers (dashed)."),
         Figure("max |H + p_t| against wall time", "wall time (s)", "max |H + p_t|", series("H_ext_max_abs"),
                logx=True, logy=True, parametric=True),
         costs, ratios])
