@@ -121,12 +121,14 @@ SRKN6B = ([0.245298957184271, 0.604872665711080, -0.350171622895351, -0.35017162
            0.604872665711080, 0.245298957184271, 0.0],
           [0.0829844064174052, 0.396309801498368, -0.0390563049223486, 0.1195241940131508,
            -0.0390563049223486, 0.396309801498368, 0.0829844064174052])
-SRKN11B = ([0.123229775946271, 0.290553797799558, -0.127049212625417, -0.246331761062075, 0.357208872795928,
-            0.2047770542914700, 0.357208872795928, -0.246331761062075, -0.127049212625417, 0.290553797799558,
-            0.123229775946271, 0.0],
-           [0.0414649985182624, 0.198128671918067, -0.0400061921041533, 0.0752539843015807, -0.0115113874206879,
-            0.2366699247869311, 0.2366699247869311, -0.0115113874206879, 0.0752539843015807, -0.0400061921041533,
-            0.198128671918067, 0.0414649985182624])
+# SRKN^a_14 of the same table, order 6 in 14 stages, drift first (the first kick empty). Each
+# half's middle coefficient follows from the sums (a: 1, b: 1/2).
+_SRKN14A_A = [0.0378593198406116, 0.102635633102435, -0.0258678882665587, 0.314241403071447, -0.130144459517415,
+              0.106417700369543, -0.00879424312851058]
+_SRKN14A_B = [0.09171915262446165, 0.183983170005006, -0.05653436583288827, 0.004914688774712854,
+              0.143761127168358, 0.328567693746804]
+SRKN14A = ([*_SRKN14A_A, 1.0 - 2.0 * sum(_SRKN14A_A), *_SRKN14A_A[::-1]],
+           [0.0, *_SRKN14A_B, 0.5 - sum(_SRKN14A_B), 0.5 - sum(_SRKN14A_B), *_SRKN14A_B[::-1]])
 
 
 # Blanes, Casas, Farres, Laskar, Makazaga & Murua, Appl. Numer. Math. 68 (2013) 58-72: ABA864, the
@@ -306,8 +308,8 @@ METHODS = {m.name: m for m in (
            "merged)", 4, "symplectic",
            lambda: _splitting(*SRKN6B), requires="separable"),
     Method("blanes-moan6", "Blanes-Moan SRKN 6", "Blanes & Moan's optimised order-6 Runge-Kutta-Nystrom "
-           "splitting (2002, SRKN11b): 12 forces per step here", 6, "symplectic",
-           lambda: _splitting(*SRKN11B), requires="separable"),
+           "splitting (2002, SRKN14a): 14 forces per step", 6, "symplectic",
+           lambda: _splitting(*SRKN14A), requires="separable"),
     Method("mclachlan8", "McLachlan 8 (15 leapfrogs)", "McLachlan's optimised symmetric composition of 15 "
            "leapfrog steps (1995), order 8: 15 forces per step", 8, "symplectic",
            lambda: compose(LEAPFROG, MCLACHLAN8), requires="separable"),

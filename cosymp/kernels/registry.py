@@ -17,7 +17,7 @@ Newton iteration makes it run-dependent: implicit steps on a nonlinear scene, or
 all: the exact flow). mirror(D): (C function, its arguments after the offsets) in bench_ref.c, or
 None where the C mirror has no such family. interleaved: whether the step computes each
 coefficient row where a stage first uses it (explicit stages: the row's transcendentals then overlap
-the previous stages' dependency chain; measured on kapitza, blanes-moan6: 425 -> 273 ns a step in a
+the previous stages' dependency chain; measured on kapitza, Blanes & Moan's SRKN11b: 425 -> 273 ns a step in a
 plain numba loop), instead of the loop computing every row before the step (an implicit step uses
 every row in each Newton iteration)."""
 

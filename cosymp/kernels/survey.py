@@ -4,7 +4,7 @@ One pass per call, nothing stored per step. The members take member steps, as
 kernels.loops.propagate_members does, so a fused run's states are those of `simulate`, on a
 linear scene too (stepping by the step matrix instead gave p_t through its quadratic form
 z.Q z/2, whose round-off grows with the spread of Q's entries: the splittings' Q, read off by
-polarization, made |H + p_t| of blanes-moan6 on damped grow to 5e-3 by gamma t = 40 with
+polarization, made |H + p_t| of the SRKN11b splitting on damped grow to 5e-3 by gamma t = 40 with
 unscaled steps, and 1000x the member steps' round-off with scaled ones). Member 0's one-step
 tangent map M_k (the step matrix on a linear scene, a complex step of the member step
 otherwise, in the step's scaled coordinates as kernels.loops.tangent_matrix and tangent_complex

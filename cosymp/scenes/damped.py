@@ -45,8 +45,9 @@ def scaled_beyond(P):
     """Up to |gamma t| = ln 2 the scaled step has e = 0 (it is the plain step), so a run within
     that range takes the plain steps without computing a scaling. Beyond it the coefficients
     e^(+-gamma t) spread, and an ensemble's step matrix (kernels.loops.propagate_matrix) gives p_t
-    through a quadratic form whose round-off grows with that spread: blanes-moan6's |H + p_t| grew
-    to 5e-3 by gamma t = 40 with plain steps, at round-off (3e-13) with scaled ones or member steps."""
+    through a quadratic form whose round-off grows with that spread: Blanes & Moan's SRKN11b
+    splitting's |H + p_t| grew to 5e-3 by gamma t = 40 with plain steps, at round-off (3e-13)
+    with scaled ones or member steps."""
     return math.inf if P.gamma == 0.0 else LN2 / abs(P.gamma)
 
 
