@@ -571,6 +571,35 @@ def test_a_session_built_ahead_of_its_page_serves_its_stylesheets_locally():
         "Panel's Divider links its stylesheet from the CDN"
 
 
+def test_a_pages_stylesheet_addresses_are_patched_from_its_documents_models(monkeypatch):
+    """page.sheets_from_the_document: Panel's patch of the stylesheet addresses of a page's roots,
+    which Panel runs before writing the page's HTML, finds the stylesheets among the document's
+    models instead of walking every model's references from each root, and patches them as Panel's
+    walk does: every CDN address local. Only right while Panel's page writer calls the patch by the
+    name it is installed under: when a release changes that, this says so."""
+    from bokeh.document import Document
+    from bokeh.model import Model
+    from bokeh.models import ImportedStyleSheet
+    from panel.io import resources, server
+
+    page.adjust_panel()
+    assert server.patch_model_css.cosymp and not getattr(server.patch_model_css.__wrapped__, "cosymp", False)
+    assert "patch_model_css(root" in inspect.getsource(server.server_html_page_for_session)
+    assert "root.select({'type': ImportedStyleSheet})" in inspect.getsource(resources.patch_model_css)
+    doc = Document()
+    roots = [pn.Column(pn.widgets.Button(name=f"b{i}"), pn.pane.Markdown(f"m{i}")).get_root(doc) for i in range(2)]
+    for root in roots:
+        doc.add_root(root)
+    cdn = [s for s in doc.models if isinstance(s, ImportedStyleSheet) and s.url.startswith(resources.CDN_DIST)]
+    assert len(cdn) >= 2, "no stylesheet linked from the CDN to patch"
+    walked = []
+    monkeypatch.setattr(Model, "references", lambda self: walked.append(self) or set())
+    for root in roots:
+        server.patch_model_css(root, resources.LOCAL_DIST)
+    assert not walked
+    assert all(s.url.startswith(resources.LOCAL_DIST) for s in cdn), [s.url for s in cdn]
+
+
 def test_a_page_whose_browser_has_gone_stops_at_the_second_look():
     """App._watch (every GONE_MS after the page has loaded): a page seen without a connection twice in a
     row stops (its runs cancelled, its leases given back) and its session is discarded (as the server's
