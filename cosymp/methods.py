@@ -323,6 +323,11 @@ METHODS = {m.name: m for m in (
 )}
 
 
+def applicable(names, scene):
+    """The names among `names` whose methods apply to `scene`, in their order."""
+    return [m for m in names if METHODS[m].refusal(scene) is None]
+
+
 def method(name):
     if name not in METHODS:
         raise InputError(f"unknown method {quoted(name)}: choose one of {', '.join(METHODS)}")

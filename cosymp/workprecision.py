@@ -38,7 +38,7 @@ from .errors import InputError, RunError
 from .integrate import MAX_STEPS, Setup, check_step, exact_flow, get_scene, simulate
 from .kernels.loops import energies
 from .kernels.registry import family
-from .methods import METHODS
+from .methods import applicable
 from .methods import method as get_method
 from .reference import scipy_reference
 
@@ -68,7 +68,7 @@ ROUNDOFF = 10.0
 
 def _setups(scene, methods, values, theta):
     scene = get_scene(scene) if isinstance(scene, str) else scene
-    names = [m for m in DEFAULT_METHODS if METHODS[m].refusal(scene) is None] if methods is None else list(methods)
+    names = applicable(DEFAULT_METHODS, scene) if methods is None else list(methods)
     if not names:
         raise InputError("no methods given: pass at least one method name")
     if "exact" in names:

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from cosymp.cli import main
-from cosymp.methods import METHODS
+from cosymp.methods import METHODS, applicable
 from cosymp.report import Figure, Report, Section, Series, envelope, render
 from cosymp.report.style import FAMILY_MARKERS, METHOD_COLORS, MIN_DISTANCE, method_marker
 from cosymp.scenes import SCENES
@@ -276,8 +276,7 @@ def test_the_paper_reports_kernels_are_compiled_ahead(monkeypatch):
     monkeypatch.setattr(Setup, "make", classmethod(recording))
     paper_report(long=False, work_precision=False)
     for name in ("damped", "modulated"):
-        applies = [m for m in WP_METHODS if METHODS[m].refusal(SCENES[name]) is None]  # as the report's
-        wp.measure(name, applies, T=1.0, hs=[0.5], peers=True, rtols=[1e-3], budget=0.0)
+        wp.measure(name, applicable(WP_METHODS, SCENES[name]), T=1.0, hs=[0.5], peers=True, rtols=[1e-3], budget=0.0)
     ahead = {k for scene, methods in kernels().items() for k in warm.unit_keys(scene, methods)}
     assert made <= ahead, made - ahead
     assert {k for scene, methods in kernels(work_precision=False).items() for k in warm.unit_keys(scene, methods)} < ahead
@@ -348,7 +347,7 @@ def sharing_a_plot():
     peers = [m for m in METHOD_COLORS if m.startswith("scipy-")]
     pairs = set()
     for scene in SCENES.values():
-        applies = [m for m in METHODS if METHODS[m].refusal(scene) is None]
+        applies = applicable(METHODS, scene)
         pairs |= {frozenset(p) for p in itertools.combinations([m for m in applies if m != "exact"] + peers, 2)}
         pairs |= {frozenset(("exact", m)) for m in applies if m != "exact"}
     return pairs

@@ -17,6 +17,7 @@ from cosymp import workprecision as wp
 from cosymp.errors import InputError
 from cosymp.integrate import Setup, check_step
 from cosymp.methods import METHODS
+from cosymp.methods import applicable as applying
 from cosymp.report.style import METHOD_COLORS, OTHER, method_color, method_marker
 from cosymp.scenes import SCENES
 
@@ -43,7 +44,7 @@ HOVER = [("solver", "@solver"), ("run", "@run"), ("steps", "@steps"), ("error at
 
 def applicable(scene, names):
     """The names of the methods that apply to the scene (never the exact flow: it is the reference)."""
-    return [m for m in names if m != "exact" and METHODS[m].refusal(SCENES[scene]) is None]
+    return [m for m in applying(names, SCENES[scene]) if m != "exact"]
 
 
 @dataclasses.dataclass(frozen=True)

@@ -10,7 +10,7 @@ import numpy as np
 
 from .. import workprecision as wp
 from ..integrate import Setup
-from ..methods import METHODS
+from ..methods import applicable
 from ..scenes import SCENES
 from ..study import compare, gauge_study
 from ..summary import long_envelopes
@@ -35,7 +35,7 @@ def kernels(work_precision=True):
             continue
         methods = [SCHEME] if s.has_gauges else [SCHEME, REFERENCE]
         if work_precision and not s.has_gauges:
-            methods += [m for m in WP_METHODS if METHODS[m].refusal(s) is None] + ["rk8"]
+            methods += applicable(WP_METHODS, s) + ["rk8"]
         out[s.name] = methods + (["exact"] if s.has_flow else [])
     return out
 
@@ -205,7 +205,7 @@ def _quantity(run, kind, k):
 
 
 def _work_precision(name, progress):
-    methods = [m for m in WP_METHODS if METHODS[m].refusal(SCENES[name]) is None]
+    methods = applicable(WP_METHODS, SCENES[name])
     rows = wp.measure(name, methods, T=SCENES[name].T, peers=True, max_steps=1 << 17, budget=0.05,
                       progress=progress)
     solvers = list(dict.fromkeys(r["solver"] for r in rows))
