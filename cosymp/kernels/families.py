@@ -7,6 +7,10 @@ Family data are arrays, so that every tableau of a family runs one compiled loop
 scratch sized by kernels.stack's bounds; the Gauss tableaus and the explicit ones of at most
 methods.FIXED_STAGES stages are tuples instead, so that their stage count (and the size of the
 Gauss Newton solve) is known at compile time: one loop per stage count, see methods._fixed. Linear scenes use the same families as matrices (kernels.linear).
+
+Sums of p_t increments start from -0.0, not 0.0 * pt: x + (-0.0) is x for every x, so the compiler
+drops that first addition (x + 0.0 is not x when x is -0.0), and the float unifies with a complex
+increment in the complex-step tangent maps.
 """
 from collections import namedtuple
 
@@ -178,7 +182,7 @@ def explicit_step(D, P, C, t, h, z, pt, W):
     n = ndof(P)
     m = 2 * n
     s = len(D.b)
-    dpt = 0.0 * pt
+    dpt = -0.0
     for i in range(s):
         for r in range(m):
             Y[r] = z[r]
@@ -256,7 +260,7 @@ def gauss_step(D, P, C, t, h, z, pt, W):
             status = OK
             break
     if status == OK:
-        dpt = 0.0 * pt
+        dpt = -0.0
         for j in range(s):
             for r in range(m):
                 y[r] = Zs[j, r]
@@ -338,7 +342,7 @@ def splitting_work(D, P, z):
 def splitting_step(D, P, C, t, h, z, pt, W):
     """Kicks and drifts, each an exact flow of one part of H + p_t (so each is symplectic on the
     extended phase space and their composition is): explicit, no Newton."""
-    dpt = 0.0 * pt
+    dpt = -0.0
     c = 0.0
     for i in range(len(D.b)):
         if D.b[i] != 0.0:
@@ -354,7 +358,7 @@ def splitting_step(D, P, C, t, h, z, pt, W):
 def perturbed_step(D, P, C, t, h, z, pt, W):
     """As splitting_step, with the flows of the near-integrable split: H0 + p_t (closed form: the
     unperturbed motion, t moving) and the small H - H0 (q and t staying)."""
-    dpt = 0.0 * pt
+    dpt = -0.0
     c = 0.0
     for i in range(len(D.b)):
         if D.b[i] != 0.0:

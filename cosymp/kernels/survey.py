@@ -343,8 +343,8 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
             if i == 0 and want & WANT_H:
                 hnew = _energy_after(D, P, C, end, Ce, t1 - tau, z)
             _rescale(z, n, e, up, down)
-            sum_, comp = _add(S, Cc, i, dpt)
-            status = _accept(status, i, z, old, sum_ + comp, Z, PT, rec, recording, Zrec, PTrec, dZrec, m)
+            sum_, comp = _add(S[i], Cc[i], dpt)
+            status = _accept(status, i, z, old, sum_ - comp, Z, PT, rec, recording, Zrec, PTrec, dZrec, m)
             if status != OK:
                 break
             S[i], Cc[i] = sum_, comp

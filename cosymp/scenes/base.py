@@ -26,7 +26,7 @@ def unshifted(P, e):
 def free_drift(P, t0, tau, z):
     """The drift of a separable scene with T = p^2/2 (one degree of freedom): q += tau p; p_t stays."""
     z[0] += tau * z[1]
-    return 0.0 * z[0]
+    return -0.0
 
 
 @dataclass(frozen=True)

@@ -28,7 +28,7 @@ def rotate(P, t0, tau, z):
     q, p = z[0], z[1]
     z[0] = c * q + s * p
     z[1] = c * p - s * q
-    return 0.0 * q
+    return -0.0
 
 
 @njit(**INLINE)

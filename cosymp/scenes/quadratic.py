@@ -65,7 +65,7 @@ def grad(P, C, r, z, g):
 
 @njit(**IR_INLINE)
 def _form(C, r, off, z, m):
-    acc = 0.0 * z[0]
+    acc = -0.0
     for i in range(m):
         row = C[r, off + i * m] * z[0]
         for j in range(1, m):
@@ -121,7 +121,7 @@ def kick(P, C, r, tau, z):
     separable H (S_qp = 0; q and t stay): p -= tau S_qq q. Returns the p_t increment -tau dV/dt."""
     n = ndof(P)
     m = 2 * n
-    dv = 0.0 * z[0]
+    dv = -0.0
     for i in range(n):
         force = C[r, i * m] * z[0]
         rate = C[r, m * m + i * m] * z[0]
