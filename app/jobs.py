@@ -301,6 +301,9 @@ class Job(param.Parameterized):
         if self._closed or run.cancelled or run.error is not None or not self.HOLD:
             run.lease.release()
         if self._closed:
+            # The page stopped while this ran, and the full collection it asked for may have come
+            # before the thread let go of the page's state: ask for another.
+            memory.Collector.request()
             return
         if run.cancelled:
             self._cancelled(run.inputs, elapsed)

@@ -890,9 +890,11 @@ def test_full_collections_wait_for_the_idle_server_unless_overdue(monkeypatch):
 
 def test_a_long_run_whose_page_closed_stops_and_publishes_nothing_more(monkeypatch):
     """release() (the session was destroyed): the run stops after its chunk, gives its lease back,
-    and publishes neither the envelopes computed since the last redraw nor a status."""
+    and publishes neither the envelopes computed since the last redraw nor a status. Its end asks
+    for a full garbage collection: the page's state may have become garbage only then."""
     budget = memory.MemoryBudget(cap_bytes=1 << 30)
     monkeypatch.setattr(memory, "BUDGET", budget)
+    monkeypatch.setattr(memory.Collector, "requested", False)
     s = Study(scene="damped", values={"gamma": 2e-4})
     held = budget.used
     lr = longrun.LongRun(s, T_long=2e5)
@@ -908,3 +910,4 @@ def test_a_long_run_whose_page_closed_stops_and_publishes_nothing_more(monkeypat
     lr.start()
     assert at_release == [len(published)] and published and not lr.running
     assert lr.status == "running" and budget.used == held
+    assert memory.Collector.requested
