@@ -57,8 +57,22 @@ from .dispatch import (
     step,
     work,
 )
-from .families import OK, START, row
-from .loops import COMPLEX_STEP, _accept, _add, _coefs, _record_start, _rescale, _scale, coef_at, energy_at
+from .families import OK, OVERFLOW, START, row
+from .loops import (
+    COMPLEX_STEP,
+    _accept,
+    _add,
+    _advance,
+    _coefs,
+    _finite,
+    _record,
+    _record_start,
+    _rescale,
+    _scale,
+    _store,
+    coef_at,
+    energy_at,
+)
 from .stack import _scene, coef_table, matrices, vectors
 
 ACC = ("H_ext_max_abs", "det_max_dev", "symp_max_dev", "symp_max_rel")
@@ -284,13 +298,14 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
     of `simulate`), and member 0's tangent map (_tangent) at the mapped steps. The figures are
     reduced in local variables and a stack copy of the growth product, written back once per
     call (stored into the arrays every step, they cost 6-10 ns a step: the compiler must assume
-    those stores change the states it keeps in registers)."""
+    those stores change the states it keeps in registers). Member 0's state, p_t and p_t's sum are
+    kept so too (y, pt0, S0, C0), the other members' go through Z and PT."""
     C = coef_table(D, P)
     Ce = coef_table(D, P)
     W = work(D, P, 0.0)
     TW = tangent_work(D, P)
-    V = vectors(P, 3, 0.0)
-    z, old, zs = V[0], V[1], V[2]
+    V = vectors(P, 5, 0.0)
+    z, old, zs, y, yold = V[0], V[1], V[2], V[3], V[4]
     MB = matrices(P, 3, 0.0)
     M, B, A = MB[0], MB[1], MB[2]
     m = 2 * ndof(P)
@@ -313,6 +328,9 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
     bin_ = np.empty(6)  # the current bin's figures (as env's columns)
     b, tbin = -1, 0.0
     status, done, in_tangent = OK, nsteps, False
+    for r in range(m):
+        y[r] = Z[0, r]
+    pt0, S0, C0 = PT[0], S[0], Cc[0]
     hnew = 0.0
     prev = 0
     tau = 0.0
@@ -326,24 +344,37 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
         mapped = every > 0 and k % every == 0
         if mapped:
             for r in range(m):
-                zs[r] = Z[0, r]
+                zs[r] = y[r]
             _rescale(zs, n, e, down, up)
-            status = _tangent(D, P, C, tk, h, zs, PT[0], M, TW)
+            status = _tangent(D, P, C, tk, h, zs, pt0, M, TW)
             if status != OK:
                 done, in_tangent = k, True
                 break
         t1 = t0 + (g + 1) * h
         recording = records and ((k + 1) % stride == 0 or k + 1 == nsteps)
-        for i in range(Z.shape[0]):
+        for r in range(m):
+            yold[r] = y[r]
+        _rescale(y, n, e, down, up)
+        status, dpt = step(D, P, C, tk, h, y, -0.0, W)
+        if want & WANT_H:
+            hnew = _energy_after(D, P, C, end, Ce, t1 - tau, y)
+        _rescale(y, n, e, up, down)
+        sum_, comp = _add(S0, C0, dpt)
+        if status == OK and not _finite(sum_, y, m):
+            status = OVERFLOW
+        if status != OK:
+            for r in range(m):
+                y[r] = yold[r]
+            done = k
+            break
+        S0, C0, pt0 = sum_, comp, sum_ - comp
+        if recording:
+            _record(rec, 0, y, yold, pt0, Zrec, PTrec, dZrec, m)
+        for i in range(1, Z.shape[0]):
             for r in range(m):
                 old[r] = Z[i, r]
                 z[r] = old[r]
-            _rescale(z, n, e, down, up)
-            status, dpt = step(D, P, C, tk, h, z, 0.0, W)
-            if i == 0 and want & WANT_H:
-                hnew = _energy_after(D, P, C, end, Ce, t1 - tau, z)
-            _rescale(z, n, e, up, down)
-            sum_, comp = _add(S[i], Cc[i], dpt)
+            status, sum_, comp = _advance(D, P, C, tk, h, z, W, e, up, down, S[i], Cc[i], m)
             status = _accept(status, i, z, old, sum_ - comp, Z, PT, rec, recording, Zrec, PTrec, dZrec, m)
             if status != OK:
                 break
@@ -353,7 +384,7 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
         if status != OK:
             done = k
             break
-        hext = hnew + PT[0]
+        hext = hnew + pt0
         if want & WANT_H:
             hmax = _most(hmax, abs(hext))
         dev = symp = 0.0
@@ -386,6 +417,8 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
                 bin_[5] = _most(bin_[5], symp)
     if width > 0:
         _flush(env, tb, b, tbin, bin_)
+    _store(Z, PT, 0, y, pt0, m)
+    S[0], Cc[0] = S0, C0
     acc[0], acc[1], acc[2], acc[3] = hmax, dmax, smax, rmax
     if G.shape[0] > 0:
         if growing:
