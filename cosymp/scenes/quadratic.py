@@ -96,10 +96,10 @@ def hess(P, C, r, z, Hm):
 
 @njit(**INLINE)
 def clear(P, C, r):
-    """Zero row r's S, dS/dt, s, ds/dt and J S (a loop of known length: `C[r, :] = 0.0` runs over
-    the row's length at run time, see kernels.dispatch.IR_INLINE)."""
+    """Zero row r's S, dS/dt, s and ds/dt (a loop of known length: `C[r, :] = 0.0` runs over the
+    row's length at run time, see kernels.dispatch.IR_INLINE); `finish` writes all of J S."""
     m = 2 * ndof(P)
-    for c in range(3 * m * m + 2):
+    for c in range(2 * m * m + 2):
         C[r, c] = 0.0
 
 
