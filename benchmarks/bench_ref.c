@@ -85,9 +85,10 @@ INLINE double dhdt(const double *c, const double *z)
 
 #define JS (2 * M * M + 2) /* where finish stores J S in a coefficient row */
 
+/* quadratic.clear: zero S, dS/dt, s and ds/dt (finish writes all of J S) */
 INLINE void fill_zero(double *c)
 {
-    for (int i = 0; i < NCOEF; i++)
+    for (int i = 0; i < JS; i++)
         c[i] = 0.0;
 }
 
@@ -104,7 +105,7 @@ INLINE void finish(double *c)
 
 INLINE double dhdt(const double *c, const double *z)
 {
-    double acc = 0.0 * z[0];
+    double acc = -0.0;
     for (int i = 0; i < M; i++) {
         double row = c[M * M + i * M] * z[0];
         for (int j = 1; j < M; j++)
@@ -436,7 +437,7 @@ INLINE int explicit_step(const Family *D, const Work *W, const double *C, double
     double *K = W->K;
     double Y[M], g[M];
     int s = D->s;
-    double dpt = 0.0 * *pt;
+    double dpt = -0.0;
     for (int i = 0; i < s; i++) {
         for (int r = 0; r < M; r++)
             Y[r] = z[r];
@@ -520,7 +521,7 @@ INLINE int gauss_step(const Family *D, const Work *W, const double *C, double h,
         }
     }
     if (status == OK) {
-        double dpt = 0.0 * *pt;
+        double dpt = -0.0;
         for (int j = 0; j < s; j++) {
             for (int r = 0; r < M; r++)
                 y[r] = Zs[j * M + r];
@@ -884,15 +885,22 @@ INLINE long coefs(const Params *P, const Family *D, double tk, double tk1, doubl
     return e;
 }
 
-/* loops._add: Neumaier's compensated sum of p_t's increments, (sum, compensation) per member */
-INLINE void add(double *S, double *Cc, long i, double d, double *sum, double *comp)
+/* loops._add: Kahan's compensated sum of p_t's increments, (sum, compensation) per member;
+   p_t = sum - compensation */
+INLINE void add(double S, double Cc, double d, double *sum, double *comp)
 {
-    double s = S[i] + d;
-    if (fabs(S[i]) >= fabs(d))
-        *comp = Cc[i] + ((S[i] - s) + d);
-    else
-        *comp = Cc[i] + ((d - s) + S[i]);
+    double y = d - Cc, s = S + y;
+    *comp = (s - S) - y;
     *sum = s;
+}
+
+/* loops._finite: pt and z all finite, by one comparison (0 x is NaN for x infinite or NaN) */
+INLINE int all_finite(double pt, const double *z)
+{
+    double nan = 0.0 * pt;
+    for (int r = 0; r < M; r++)
+        nan += 0.0 * z[r];
+    return nan == 0.0;
 }
 
 /* _accept: check the member's new state, store it, record it */
@@ -900,11 +908,8 @@ INLINE int accept(int status, long i, const double *z, const double *old, double
                          long rec, int recording)
 {
     long N = L->N, ld = L->m;
-    if (status == OK && !isfinite(pt))
+    if (status == OK && !all_finite(pt, z))
         status = OVERFLOW;
-    for (int r = 0; r < M; r++)
-        if (!isfinite(z[r]))
-            status = OVERFLOW;
     if (status == OK) {
         L->PT[i] = pt;
         for (int r = 0; r < M; r++)
@@ -921,9 +926,80 @@ INLINE int accept(int status, long i, const double *z, const double *old, double
     return status;
 }
 
+#if !LINEAR
+/* loops._one_loop: a single member, its state, p_t and p_t's compensation kept in locals from
+   step to step and stored on return (the last good state where a step fails) */
+INLINE int propagate_one(int family, const Family *D, const Work *W, const Params *P, Loop *Lp)
+{
+    Loop L = *Lp;
+    double t0 = L.t0, h = L.h;
+    double C[D->u * NCOEF], z[M], old[M];
+    int can_reuse = D->u > 1 && D->offsets[0] == 0.0 && D->offsets[D->u - 1] == 1.0;
+    L.Trec[0] = t0;
+    L.PTrec[0] = L.PT[0];
+    for (int r = 0; r < M; r++) {
+        L.Zrec[r] = L.Z[r];
+        if (L.ndz > 0)
+            L.dZrec[r] = NAN;
+        z[r] = L.Z[r];
+    }
+    double pt = L.PT[0], S = pt, Cc = 0.0;
+    long rec = 1, prev = 0, due = L.stride, ld = L.m;
+    double up = 1.0, down = 1.0;
+    for (long k = 0; k < L.nsteps; k++) {
+        double tau;
+        long e = coefs(P, D, t0 + k * h, t0 + (k + 1) * h, h, C, can_reuse && k > 0, prev, &tau);
+        if (e != prev) {
+            up = ldexp(1.0, (int)e);
+            down = ldexp(1.0, (int)-e);
+            prev = e;
+        }
+        for (int r = 0; r < M; r++)
+            old[r] = z[r];
+        double dpt = -0.0, sum, comp;
+        rescale(z, e, down, up);
+        int status = step(family, D, W, C, h, z, &dpt);
+        rescale(z, e, up, down);
+        add(S, Cc, dpt, &sum, &comp);
+        if (status == OK && !all_finite(sum, z))
+            status = OVERFLOW;
+        if (status != OK) {
+            L.PT[0] = pt;
+            for (int r = 0; r < M; r++)
+                L.Z[r] = old[r];
+            Lp->done = k;
+            return status;
+        }
+        S = sum;
+        Cc = comp;
+        pt = sum - comp;
+        if (--due == 0 || k + 1 == L.nsteps) {
+            L.PTrec[rec] = pt;
+            for (int r = 0; r < M; r++) {
+                L.Zrec[rec * ld + r] = z[r];
+                if (L.ndz > 0)
+                    L.dZrec[rec * ld + r] = z[r] - old[r];
+            }
+            L.Trec[rec] = t0 + (k + 1) * h;
+            rec += 1;
+            due = L.stride;
+        }
+    }
+    L.PT[0] = pt;
+    for (int r = 0; r < M; r++)
+        L.Z[r] = z[r];
+    Lp->done = L.nsteps;
+    return OK;
+}
+#endif
+
 INLINE int propagate(int family, const Family *D, const Work *W,
                                                            const Params *P, Loop *Lp)
 {
+#if !LINEAR
+    if (Lp->N == 1)
+        return propagate_one(family, D, W, P, Lp);
+#endif
     Loop L = *Lp;
     double t0 = L.t0, h = L.h;
     long ld = L.m;
@@ -980,19 +1056,19 @@ INLINE int propagate(int family, const Family *D, const Work *W,
             }
             rescale(z, e, up, down);
             double sum, comp;
-            add(S, Cc, i, -(0.5 * quad + s), &sum, &comp);
-            int status = accept(OK, i, z, old, sum + comp, &L, rec, recording);
+            add(S[i], Cc[i], -(0.5 * quad + s), &sum, &comp);
+            int status = accept(OK, i, z, old, sum - comp, &L, rec, recording);
 #else
             for (int r = 0; r < M; r++) {
                 old[r] = L.Z[i * ld + r];
                 z[r] = old[r];
             }
-            double dpt = 0.0, sum, comp;
+            double dpt = -0.0, sum, comp;
             rescale(z, e, down, up);
             int status = step(family, D, W, C, h, z, &dpt);
             rescale(z, e, up, down);
-            add(S, Cc, i, dpt, &sum, &comp);
-            status = accept(status, i, z, old, sum + comp, &L, rec, recording);
+            add(S[i], Cc[i], dpt, &sum, &comp);
+            status = accept(status, i, z, old, sum - comp, &L, rec, recording);
 #endif
             if (status != OK) {
                 free(S);
