@@ -59,7 +59,8 @@ def parser():
     w = sub.add_parser("workprecision", help="error against cost for the methods (and scipy's solvers) on one "
                        "scene; --long: error and H + p_t drift as T grows")
     w.add_argument("scene")
-    w.add_argument("--methods", nargs="+", help="methods to compare (default: all that apply)")
+    w.add_argument("--methods", nargs="+", help="methods to compare (default: those of the work-precision "
+                   "set that apply, the splittings by leapfrog and blanes-moan6; `cosymp methods` lists all)")
     w.add_argument("--peers", action="store_true", help="add scipy solve_ivp RK45, DOP853 and LSODA at rtol = atol "
                    "from 1e-3 to 1e-13")
     w.add_argument("--T", type=_number, help="horizon (default: the scene's paper value)")

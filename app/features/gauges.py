@@ -159,7 +159,7 @@ class GaugeView(FeatureView):
         self.study.param.watch(lambda e: self.changed(), "scene")
         button = pn.widgets.Button(name="Open the paper's gauge figure", button_type="primary")
         button.on_click(lambda event: open_gauge_figure(self.study))
-        self.away = pn.Column(note("<p>The gauge study is about the charged particle in a time-dependent field: "
+        self.away = pn.Column(note(f"<p>The gauge study is about the scene <b>{html.escape(gauged_scene().title)}</b>: "
                                    f"the paper's figure is <b>{html.escape(gauge_figure().name)}</b>.</p>"),
                               button)
         self.floor = note("")
