@@ -885,6 +885,20 @@ INLINE long coefs(const Params *P, const Family *D, double tk, double tk1, doubl
     return e;
 }
 
+/* loops._step_start: step k's scaling and time coefficients; the scaling's factors change
+   with its exponent only */
+INLINE long step_start(const Params *P, const Family *D, double t0, double h, long k, double *C,
+                       int can_reuse, long *prev, double *up, double *down, double *tau)
+{
+    long e = coefs(P, D, t0 + k * h, t0 + (k + 1) * h, h, C, can_reuse && k > 0, *prev, tau);
+    if (e != *prev) {
+        *up = ldexp(1.0, (int)e);
+        *down = ldexp(1.0, (int)-e);
+        *prev = e;
+    }
+    return e;
+}
+
 /* loops._add: Kahan's compensated sum of p_t's increments, (sum, compensation) per member;
    p_t = sum - compensation */
 INLINE void add(double S, double Cc, double d, double *sum, double *comp)
@@ -948,12 +962,7 @@ INLINE int propagate_one(int family, const Family *D, const Work *W, const Param
     double up = 1.0, down = 1.0;
     for (long k = 0; k < L.nsteps; k++) {
         double tau;
-        long e = coefs(P, D, t0 + k * h, t0 + (k + 1) * h, h, C, can_reuse && k > 0, prev, &tau);
-        if (e != prev) {
-            up = ldexp(1.0, (int)e);
-            down = ldexp(1.0, (int)-e);
-            prev = e;
-        }
+        long e = step_start(P, D, t0, h, k, C, can_reuse, &prev, &up, &down, &tau);
         for (int r = 0; r < M; r++)
             old[r] = z[r];
         double dpt = -0.0, sum, comp;
@@ -1026,12 +1035,7 @@ INLINE int propagate(int family, const Family *D, const Work *W,
     double up = 1.0, down = 1.0;
     for (long k = 0; k < L.nsteps; k++) {
         double tau;
-        long e = coefs(P, D, t0 + k * h, t0 + (k + 1) * h, h, C, can_reuse && k > 0, prev, &tau);
-        if (e != prev) {
-            up = ldexp(1.0, (int)e);
-            down = ldexp(1.0, (int)-e);
-            prev = e;
-        }
+        long e = step_start(P, D, t0, h, k, C, can_reuse, &prev, &up, &down, &tau);
         double tk = t0 + k * h - tau;
 #if LINEAR
         double s = lmatrix(family, D, W, P, C, tk, h, Mm, Q);

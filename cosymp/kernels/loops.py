@@ -76,6 +76,24 @@ def _coefs(D, P, tk, tk1, h, tau, C, reuse):
 
 
 @njit(**INLINE)
+def _reusable(D):
+    """Whether family D's first coefficient row of a step is the last row of the step before (its
+    offsets run from 0 to 1)."""
+    u = len(D.offsets)
+    return u > 1 and D.offsets[0] == 0.0 and D.offsets[u - 1] == 1.0
+
+
+@njit(**INLINE)
+def _step_start(D, P, t0, h, g, fresh, scaled, prev, tau, up, down, C, reusable):
+    """The start of step g from t0: its scaling (`_scale`, given the last step's) and its time
+    coefficients into C (`_coefs`, reusing the last step's end unless `fresh` or the scaling
+    changed). Returns (e, tau, 2^e, 2^-e, the step's start time shifted by tau)."""
+    e, tau, up, down = _scale(P, t0 + g * h, scaled, prev, tau, up, down)
+    _coefs(D, P, t0 + g * h, t0 + (g + 1) * h, h, tau, C, reusable and not fresh and e == prev)
+    return e, tau, up, down, t0 + g * h - tau
+
+
+@njit(**INLINE)
 def _factors(e):
     """(2^e, 2^-e): exact powers of two (0 or inf only where |e| passes the exponent range, at
     the end of the state's own range)."""
@@ -243,8 +261,7 @@ def _matrix_loop(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, s
     V = vectors(P, 3, 0.0)
     z, old, zs = V[0], V[1], V[2]
     m = 2 * ndof(P)
-    u = len(D.offsets)
-    can_reuse = u > 1 and D.offsets[0] == 0.0 and D.offsets[u - 1] == 1.0
+    reusable = _reusable(D)
     _record_start(t0, Z, PT, Trec, Zrec, PTrec, dZrec, m)
     S, Cc = PT.copy(), np.zeros_like(PT)
     rec = 1
@@ -252,10 +269,8 @@ def _matrix_loop(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, s
     tau = 0.0
     up = down = 1.0
     for k in range(nsteps):
-        e, tau, up, down = _scale(P, t0 + k * h, scaled, prev, tau, up, down)
-        _coefs(D, P, t0 + k * h, t0 + (k + 1) * h, h, tau, C, can_reuse and k > 0 and e == prev)
+        e, tau, up, down, tk = _step_start(D, P, t0, h, k, k == 0, scaled, prev, tau, up, down, C, reusable)
         prev = e
-        tk = t0 + k * h - tau
         s = lmatrix(D, P, C, tk, h, M, Q, LW)
         recording = (k + 1) % stride == 0 or k + 1 == nsteps
         for i in range(Z.shape[0]):
@@ -272,15 +287,19 @@ def _matrix_loop(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, s
     return OK, nsteps, rec
 
 
+@njit(**IR_INLINE)
+def _member_scratch(D, P):
+    """A member loop's stack scratch (inlined in numba's IR, so that it is the loop's): the step's
+    coefficient rows and work, the state and the state before the step."""
+    V = vectors(P, 2, 0.0)
+    return coef_table(D, P), work(D, P, 0.0), V[0], V[1]
+
+
 @njit(**INLINE)
 def _members_loop(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, scaled):
-    C = coef_table(D, P)
-    W = work(D, P, 0.0)
-    V = vectors(P, 2, 0.0)
-    z, old = V[0], V[1]
+    C, W, z, old = _member_scratch(D, P)
     m = 2 * ndof(P)
-    u = len(D.offsets)
-    can_reuse = u > 1 and D.offsets[0] == 0.0 and D.offsets[u - 1] == 1.0
+    reusable = _reusable(D)
     _record_start(t0, Z, PT, Trec, Zrec, PTrec, dZrec, m)
     S, Cc = PT.copy(), np.zeros_like(PT)
     rec = 1
@@ -288,10 +307,8 @@ def _members_loop(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, 
     tau = 0.0
     up = down = 1.0
     for k in range(nsteps):
-        e, tau, up, down = _scale(P, t0 + k * h, scaled, prev, tau, up, down)
-        _coefs(D, P, t0 + k * h, t0 + (k + 1) * h, h, tau, C, can_reuse and k > 0 and e == prev)
+        e, tau, up, down, tk = _step_start(D, P, t0, h, k, k == 0, scaled, prev, tau, up, down, C, reusable)
         prev = e
-        tk = t0 + k * h - tau
         recording = (k + 1) % stride == 0 or k + 1 == nsteps
         for i in range(Z.shape[0]):
             for r in range(m):
@@ -314,13 +331,9 @@ def _one_loop(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, scal
     variables from step to step and stored into Z and PT on return (the last good state where a
     step fails). Read back from Z every step, the state cost a cheap step 1-2 ns: the compiler
     must assume that storing into one array changes the others."""
-    C = coef_table(D, P)
-    W = work(D, P, 0.0)
-    V = vectors(P, 2, 0.0)
-    z, old = V[0], V[1]
+    C, W, z, old = _member_scratch(D, P)
     m = 2 * ndof(P)
-    u = len(D.offsets)
-    can_reuse = u > 1 and D.offsets[0] == 0.0 and D.offsets[u - 1] == 1.0
+    reusable = _reusable(D)
     _record_start(t0, Z, PT, Trec, Zrec, PTrec, dZrec, m)
     for r in range(m):
         z[r] = Z[0, r]
@@ -332,10 +345,8 @@ def _one_loop(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, scal
     tau = 0.0
     up = down = 1.0
     for k in range(nsteps):
-        e, tau, up, down = _scale(P, t0 + k * h, scaled, prev, tau, up, down)
-        _coefs(D, P, t0 + k * h, t0 + (k + 1) * h, h, tau, C, can_reuse and k > 0 and e == prev)
+        e, tau, up, down, tk = _step_start(D, P, t0, h, k, k == 0, scaled, prev, tau, up, down, C, reusable)
         prev = e
-        tk = t0 + k * h - tau
         for r in range(m):
             old[r] = z[r]
         status, sum_, comp = _advance(D, P, C, tk, h, z, W, e, up, down, S, Cc, m)

@@ -63,12 +63,12 @@ from .loops import (
     _accept,
     _add,
     _advance,
-    _coefs,
     _finite,
     _record,
     _record_start,
     _rescale,
-    _scale,
+    _reusable,
+    _step_start,
     _store,
     coef_at,
     energy_at,
@@ -318,7 +318,7 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
         _record_start(t0 + first * h, Z, PT, Trec, Zrec, PTrec, dZrec, m)
     rec = 1
     u = len(D.offsets)
-    can_reuse = u > 1 and D.offsets[0] == 0.0 and D.offsets[u - 1] == 1.0
+    reusable = _reusable(D)
     end = u - 1 if D.offsets[u - 1] == 1.0 else -1
     hmax, dmax, smax, rmax = acc[0], acc[1], acc[2], acc[3]
     growing = G.shape[0] > 0 and gstate[2] == 1.0
@@ -337,10 +337,8 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
     up = down = 1.0
     for k in range(nsteps):
         g = first + k
-        e, tau, up, down = _scale(P, t0 + g * h, scaled, prev, tau, up, down)
-        _coefs(D, P, t0 + g * h, t0 + (g + 1) * h, h, tau, C, can_reuse and k > 0 and e == prev)
+        e, tau, up, down, tk = _step_start(D, P, t0, h, g, k == 0, scaled, prev, tau, up, down, C, reusable)
         prev = e
-        tk = t0 + g * h - tau
         mapped = every > 0 and k % every == 0
         if mapped:
             for r in range(m):
