@@ -888,6 +888,48 @@ def test_full_collections_wait_for_the_idle_server_unless_overdue(monkeypatch):
     assert full and set(full) == {1, memory.COLLECT_DUE, memory.COLLECT_FORCED}, full
 
 
+def test_a_requested_collection_is_followed_by_more_at_idle_moments(monkeypatch):
+    """memory.Collector: after a stopped page's collection, more come COLLECT_FOLLOW_S after it (each
+    once the server is idle), for the state that something still held at the first; then none."""
+    import asyncio
+
+    monkeypatch.setattr(memory.Collector, "task", None)
+    monkeypatch.setattr(memory.Collector, "requested", False)
+    monkeypatch.setattr(memory.Collector, "follow", ())
+    monkeypatch.setattr(memory, "COLLECT_CHECK_S", 0.0)
+    monkeypatch.setattr(gc, "set_threshold", lambda *t: None)
+    monkeypatch.setattr(gc, "get_count", lambda: (0, 0, 0))
+    clock = [1000.0]
+    monkeypatch.setattr(memory.time, "monotonic", lambda: clock[0])
+    full = []
+    monkeypatch.setattr(gc, "collect", lambda *a: full.append(clock[0]))
+    idle = [True]
+
+    async def served():
+        memory.Collector.start(lambda seconds: idle[0])
+
+        async def at(t, is_idle=True):
+            clock[0], idle[0] = t, is_idle
+            for _ in range(3):
+                await asyncio.sleep(0)
+
+        memory.Collector.request()
+        await at(1000.0)
+        assert full == [1000.0]
+        await at(1004.0)
+        await at(1006.0, is_idle=False)
+        assert full == [1000.0], "not before its delay, nor while the server is busy"
+        await at(1007.0)
+        await at(1016.0)
+        await at(1041.0)
+        await at(1200.0)
+        assert full == [1000.0, 1007.0, 1016.0, 1041.0], full
+        memory.Collector.task.cancel()
+
+    asyncio.run(served())
+    assert memory.COLLECT_FOLLOW_S == (5.0, 15.0, 40.0)
+
+
 def test_a_long_run_whose_page_closed_stops_and_publishes_nothing_more(monkeypatch):
     """release() (the session was destroyed): the run stops after its chunk, gives its lease back,
     and publishes neither the envelopes computed since the last redraw nor a status. Its end asks
