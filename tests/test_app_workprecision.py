@@ -209,6 +209,30 @@ def test_the_methods_and_defaults_follow_the_scene():
     assert (lh.h, lh.T_max) == (0.001, 1e3)
 
 
+def test_the_methods_widgets_follow_the_scene_when_their_tab_is_shown_and_write_the_choice_back():
+    """Hidden, a scene change leaves the tab's two multi-choices as they were (each change of one
+    costs the browser a render of it); shown again, they hold the new scene's methods; a choice made
+    in one is the measurement's."""
+    s = Study(scene="damped")
+    m, lh = WorkPrecision(s), LongHorizons(s)
+    view = views.WorkPrecisionView(s, SimpleNamespace(measure=m, long=lh))
+    view.__panel__()
+    wp_choice, long_choice = (c.widget for c in view.choices)
+    before = [(list(w.options), list(w.value)) for w in (wp_choice, long_choice)]
+    assert before == [(m.param.methods.objects, m.methods), (lh.param.methods.objects, lh.methods)]
+    s.scene = "charged"
+    assert "boris" in m.methods and "boris" in m.param.methods.objects
+    assert [(list(w.options), list(w.value)) for w in (wp_choice, long_choice)] == before, "hidden: not sent"
+    s.view = "workprecision"
+    view.shown()
+    for w, job in ((wp_choice, m), (long_choice, lh)):
+        assert list(w.options) == job.param.methods.objects and "boris" in w.options and list(w.value) == job.methods
+    wp_choice.value = ["boris", "rk4"]
+    assert m.methods == ["boris", "rk4"]
+    s.scene = "kapitza"
+    assert "boris" not in wp_choice.options and list(wp_choice.value) == m.methods, "shown: follows at once"
+
+
 def test_long_horizons_show_linear_error_growth_and_the_fitted_exponents():
     s = Study(scene="damped", values={"gamma": 0.0002})
     lh = LongHorizons(s, methods=["rk4", "gauss4"], T_max=1e4)
