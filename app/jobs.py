@@ -73,6 +73,7 @@ class Run:
         self.result = None
         self.error = None
         self.started = time.perf_counter()
+        self.computed_s = None  # how long the computation itself took, in its thread
         self.finished = threading.Event()
         self._wake = None
         self._compute = job._compute
@@ -98,6 +99,7 @@ class Run:
                 pass
 
     def _main(self):
+        start = time.perf_counter()
         try:
             self.result = self._compute(self.inputs, self)
         except Cancelled:
@@ -105,6 +107,7 @@ class Run:
         except FAILURES as err:
             self.error = err
         finally:
+            self.computed_s = time.perf_counter() - start
             if self.result is None and self.error is None and not self.cancelled:
                 self.error = RuntimeError("the computation stopped without a result (see the server's log)")
             self.finished.set()

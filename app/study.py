@@ -363,9 +363,13 @@ class Study(Job):
         return expected_quick(SECONDS_PER_STEP.get((self.scene, self.method, self.other)), self.h, self.T)
 
     def _done_in(self, inputs, elapsed):
-        """A live comparison keeps no status line; its cost per step is noted (`quick`)."""
+        """A live comparison keeps no status line; its cost per step is noted (`quick`): the time the
+        computation itself took, not the time to its results on the loop (`elapsed`), which counts
+        the loop's other work meanwhile. With the latter, a comparison computed in its thread once
+        was never quick again: modulated's first view (6 ms) noted 35-40 ms a time, above QUICK_S,
+        and each scene change to it came in two messages 110 ms apart."""
         scene, setups, h, T, _ = inputs
-        SECONDS_PER_STEP[(scene, *(s.method.name for s in setups))] = elapsed / check_step(h, T)
+        SECONDS_PER_STEP[(scene, *(s.method.name for s in setups))] = self.run.computed_s / check_step(h, T)
 
 
 def study_report(study):

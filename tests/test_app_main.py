@@ -9,7 +9,8 @@ import types
 import panel as pn
 
 from app import main, page
-from app.features import FEATURES, base, workprecision
+from app.features import FEATURES, base, theta, workprecision
+from cosymp.scenes import SCENES
 
 
 def test_the_page_has_every_view_and_follows_the_study():
@@ -445,6 +446,9 @@ def test_tabs_are_built_ahead_one_at_a_time_while_the_page_is_idle_and_start_no_
     only this server's measurement of the same inputs (another page's). Gauges is not built ahead.
     Orbits builds the figures of the two-degree-of-freedom shape, hidden."""
     monkeypatch.setattr(workprecision, "MEASURED", {})  # no other test's measurement
+    # The lesson quick, as a fast server would have found it (this one's cost is not the subject: on a
+    # slow machine modulated's lesson took 37 ms, above QUICK_S).
+    monkeypatch.setattr(theta, "LESSON_SECONDS_PER_STEP", dict.fromkeys(SCENES, 1e-9))
     app = main.App()
     names = [f.name for f in FEATURES]
     app._ahead()
@@ -526,6 +530,7 @@ def test_work_precision_is_drawn_ahead_with_the_servers_measurement_of_the_same_
 
 def test_a_lesson_leasing_more_than_the_ahead_bound_waits_for_its_tab(monkeypatch):
     """Follower.ahead computes only under AHEAD_BYTES: every open page would hold the lease."""
+    monkeypatch.setattr(theta, "LESSON_SECONDS_PER_STEP", dict.fromkeys(SCENES, 1e-9))  # quick, as above
     app = main.App()
     lesson = app.states["theta"]
     need = lesson._bytes(lesson._inputs())

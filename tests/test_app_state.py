@@ -6,6 +6,7 @@ import json
 import math
 import pathlib
 import re
+import time
 import weakref
 from urllib.parse import parse_qsl, urlsplit
 
@@ -17,6 +18,7 @@ from app.features import cloud, common, gauges, longrun, orbits, structure, thet
 from app.plotting import DENSE, POINTS, Raster
 from app.presets import PRESETS, URL_NAMES, case_state, first_state, parse_items, query_items
 from app.study import QUICK_S, Study
+from cosymp.integrate import check_step
 from cosymp.methods import METHODS
 from cosymp.reference import reference_final
 from cosymp.scenes import SCENES, first, lead
@@ -479,6 +481,19 @@ def test_theta_lesson_is_computed_in_the_handler_where_the_last_lesson_or_compar
     theta.LESSON_SECONDS_PER_STEP["damped"] = 2 * QUICK_S / 500
     assert not lesson.quick(), "the lesson's own cost, not the comparison's"
 
+
+def test_a_comparison_notes_the_time_it_took_in_its_thread_not_the_wait_for_the_loop():
+    """Whether the next comparison is quick (computed in the change's handler, its results in the
+    same message) is decided by this one's cost: the time the computation took, however long the
+    loop, busy with other pages, took to take its results."""
+    s = Study(scene="damped")
+    key = ("damped", s.method, s.other)
+    run = s._begin()
+    run._main()
+    time.sleep(2 * QUICK_S)  # the loop busy elsewhere
+    s._end(run)
+    assert study.SECONDS_PER_STEP[key] * check_step(s.h, s.T) == pytest.approx(run.computed_s)
+    assert run.computed_s < QUICK_S <= time.perf_counter() - run.started and s.quick()
 
 def test_gauge_study_gives_every_gauge_and_invariant_transported_observables():
     s = Study(scene="charged", method="symplectic-euler", view="gauges")

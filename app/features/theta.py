@@ -107,9 +107,10 @@ class ThetaLesson(Follower):
         return expected_quick(rate, s.h, s.T)
 
     def _done_in(self, inputs, elapsed):
-        """A live view keeps no status line; its cost per step is noted (`quick`)."""
+        """A live view keeps no status line; its cost per step is noted (`quick`), as the time the
+        computation took in its thread (see Study._done_in)."""
         scene, _, h, T, _ = inputs
-        LESSON_SECONDS_PER_STEP[scene] = elapsed / check_step(h, T)
+        LESSON_SECONDS_PER_STEP[scene] = self.run.computed_s / check_step(h, T)
 
 
 class ThetaView(FeatureView):
