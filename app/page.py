@@ -22,7 +22,7 @@ from panel.reactive import Syncable
 from panel.theme import Bootstrap
 from tornado.websocket import WebSocketClosedError, WebSocketHandler
 
-from . import properties
+from . import messages, properties
 
 REBOOT = "app/static/bootstrap_reboot.css"  # Bootstrap's Reboot section, verbatim (see Design)
 # BokehJS adjusted in the page (served from app/static by the server; see each file).
@@ -283,9 +283,11 @@ def adjust_panel():
     causes reaches the page in one message. Pages load only the BokehJS bundles they use, no
     queued message waits for the next change to be sent, a page that closes while being
     written to leaves no traceback in the log, a page without settings gets a spare session, a
-    page's stylesheet addresses are patched from its document's models, and Bokeh's properties
-    compute their per-class constants once (app/properties.py)."""
+    page's stylesheet addresses are patched from its document's models, Bokeh's properties
+    compute their per-class constants once (app/properties.py) and its messages map the document's
+    models without a Python loop over them (app/messages.py)."""
     properties.install()
+    messages.install()
     Resources._default_components = BOKEH_BUNDLES
     Syncable._debounce = 0
     if not getattr(Syncable._change_event, "cosymp", False):
