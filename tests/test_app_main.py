@@ -193,7 +193,7 @@ def test_the_layouts_shim_still_matches_bokehjs():
     LayoutDOMView.invalidate_layout handing the request up to the root, which lays out the page at
     once, and on Document.apply_json_patch applying a message; it lays out and waits for only the
     shown components through LayoutDOMView.layoutable_views and has_finished (and Panel's
-    TabsView.update_active), and a plot alone through PlotView._invalidate_layout_if_needed: when a
+    TabsView.update_active), lets only those lay out the page when they resize (_after_resize), and a plot alone through PlotView._invalidate_layout_if_needed: when a
     Bokeh or Panel release changes any of these, this says so."""
     import re
     from pathlib import Path
@@ -214,6 +214,11 @@ def test_the_layouts_shim_still_matches_bokehjs():
     assert re.search(r"has_finished\(\) \{\s*if \(!super\.has_finished\(\)\) \{\s*return false;\s*\}\s*"
                      r"if \(this\.is_layout_root && !this\._layout_computed\) \{\s*return false;\s*\}\s*"
                      r"for \(const child_view of this\.child_views\) \{", js)
+    # a component that resized lays out its root (left out when it is not shown) through _after_resize
+    assert re.search(r"after_resize\(\) \{\s*this\._resized = true;\s*if \(this\.update_bbox\(\)\) \{\s*"
+                     r"this\._after_resize\(\);", js)
+    assert re.search(r"_after_resize\(\) \{\s*super\._after_resize\(\);\s*if \(this\.is_layout_root && "
+                     r"!this\._was_built\) \{(?:(?!\n        \}\n).)*this\.compute_layout\(\);", js, re.DOTALL)
     # a plot whose axes changed lays out itself through compute_layout
     assert re.search(r"_invalidate_layout_if_needed\(\) \{(?:(?!\n        \}\n).)*this\.compute_layout\(\);",
                      js, re.DOTALL)

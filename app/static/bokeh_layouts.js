@@ -138,6 +138,24 @@
         return all;
       },
     });
+    // Nor does a component left out lay out the page when its size changes. Each component watches
+    // its own size (a ResizeObserver), and one that resized laid out its root: after a scene of
+    // another shape was shown, the hidden tabs' contents and the hidden figures resized, and each
+    // laid out the page again (nine layouts of 25-45 ms in a row, after the one that counted).
+    const resized = View.prototype._after_resize;
+    const left_out = (view) => {
+      for (let v = view; v.parent instanceof View; v = v.parent) {
+        if (!v.parent.layoutable_views.includes(v)) {
+          return true;
+        }
+      }
+      return false;
+    };
+    View.prototype._after_resize = function () {
+      if (!left_out(this)) {
+        resized.call(this);
+      }
+    };
   }
   window.cosymp_bokeh_layouts = true;
 })();
