@@ -193,8 +193,9 @@ def test_the_layouts_shim_still_matches_bokehjs():
     LayoutDOMView.invalidate_layout handing the request up to the root, which lays out the page at
     once, and on Document.apply_json_patch applying a message; it lays out and waits for only the
     shown components through LayoutDOMView.layoutable_views and has_finished (and Panel's
-    TabsView.update_active), lets only those lay out the page when they resize (_after_resize), and a plot alone through PlotView._invalidate_layout_if_needed: when a
-    Bokeh or Panel release changes any of these, this says so."""
+    TabsView.update_active), lets only those lay out the page when they resize (_after_resize), and
+    a plot alone through PlotView._invalidate_layout_if_needed: when a Bokeh or Panel release changes
+    any of these, this says so."""
     import re
     from pathlib import Path
 

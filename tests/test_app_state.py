@@ -495,6 +495,7 @@ def test_a_comparison_notes_the_time_it_took_in_its_thread_not_the_wait_for_the_
     assert study.SECONDS_PER_STEP[key] * check_step(s.h, s.T) == pytest.approx(run.computed_s)
     assert run.computed_s < QUICK_S <= time.perf_counter() - run.started and s.quick()
 
+
 def test_gauge_study_gives_every_gauge_and_invariant_transported_observables():
     s = Study(scene="charged", method="symplectic-euler", view="gauges")
     g = gauges.GaugeStudy(s)
