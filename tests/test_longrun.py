@@ -45,8 +45,9 @@ def test_ten_million_steps_stay_bounded():
 def test_the_default_stride_records_the_state_at_T_at_two_to_the_24_steps():
     """At kapitza, midpoint, N = 2^24 the default stride is 3: the last record was step N - 1
     (its error read 2.7e-5 instead of 5.2e-9). It is the state at T, bit-identical to a run that
-    records only the final state."""
-    s = setup("kapitza", "midpoint")
+    records only the final state. The records do not depend on the method: leapfrog's steps cost a
+    tenth of midpoint's Newton ones (two runs of 2^24 steps: 16 s -> 2 s)."""
+    s = setup("kapitza", "leapfrog")
     N = 2 ** 24
     h = 20.0 / N
     run = simulate(s, h, N * h)
