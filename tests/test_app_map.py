@@ -4,6 +4,7 @@ import math
 import tracemalloc
 
 import numpy as np
+import panel as pn
 import pytest
 from bokeh.models import LogColorMapper
 
@@ -41,6 +42,36 @@ def test_each_scene_gets_its_default_axes_and_the_study_names_its_choices():
     s.scene = "kapitza"
     s.method = "theta"
     assert m.param.x.objects[-1] == "theta" and (m.x, m.y) == ("nu", "a")
+
+
+def test_the_axis_controls_follow_the_scene_when_their_tab_is_shown_and_write_what_is_typed(monkeypatch):
+    """Hidden, a scene change leaves the map's eleven controls as they were (each change would be a
+    message and a render in the page); shown, they hold the new scene's axes and measure, and follow
+    at once; a value set in one is the map's."""
+    s = Study(scene="damped")
+    m = StabilityMap(s)
+    monkeypatch.setattr(m, "request", lambda: None)  # the map a shown tab computes: tested below
+    view = maps.StabilityMapView(s, m)
+    layout = view.__panel__()
+    selects = {w.label: w for w in layout.select(pn.widgets.Select)}
+    x_axis, measure = selects["x axis"], selects["Measure"]
+    cells = next(w for w in layout.select(pn.widgets.IntInput) if w.label == "cells in x")
+    before = (x_axis.value, list(x_axis.options), measure.value)
+    assert before == (m.x, m.param.x.objects, m.measure) and (cells.start, cells.end) == m.param.nx.bounds
+    s.scene = "modulated"
+    assert (m.x, m.y) == ("alpha", "eps")
+    assert (x_axis.value, list(x_axis.options), measure.value) == before, "hidden: not sent"
+    s.view = "map"
+    view.shown()
+    assert (x_axis.value, list(x_axis.options), measure.value) == (m.x, m.param.x.objects, m.measure)
+    for w in layout.select(pn.widgets.FloatInput):
+        assert w.value in (m.x_start, m.x_stop, m.y_start, m.y_stop)
+    cells.value = 12
+    assert m.nx == 12
+    x_axis.value = "h"
+    assert m.x == "h"
+    s.scene = "kapitza"
+    assert (x_axis.value, list(x_axis.options)) == (m.x, m.param.x.objects), "shown: follows at once"
 
 
 @pytest.mark.parametrize("scene", list(SCENES))

@@ -7,6 +7,7 @@ import time
 from types import SimpleNamespace
 
 import numpy as np
+import panel as pn
 import pytest
 
 from app import memory
@@ -218,8 +219,7 @@ def test_the_methods_widgets_follow_the_scene_when_their_tab_is_shown_and_write_
     m, lh = WorkPrecision(s), LongHorizons(s)
     monkeypatch.setattr(m, "request", lambda: None)
     view = views.WorkPrecisionView(s, SimpleNamespace(measure=m, long=lh))
-    view.__panel__()
-    wp_choice, long_choice = (c.widget for c in view.choices)
+    wp_choice, long_choice = view.__panel__().select(pn.widgets.MultiChoice)
     before = [(list(w.options), list(w.value)) for w in (wp_choice, long_choice)]
     assert before == [(m.param.methods.objects, m.methods), (lh.param.methods.objects, lh.methods)]
     s.scene = "charged"

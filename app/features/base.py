@@ -23,6 +23,53 @@ class Feature:
     ahead: bool = True  # its tab is built ahead of its first showing, in the page's idle time
 
 
+class ShownWidget:
+    """A widget for the parameter `name` of `obj` that writes what the user sets into it at once but
+    follows the parameter (its value, and its choices for a selector) only while `visible()`, and
+    catches up when `sync` is called (its tab shown). Made with `from_param`, a hidden tab's widgets
+    followed every scene change: each change is a message to the page and a render there (BokehJS
+    renders a MultiChoice anew, Choices.js, for each change of its options or value: 78 ms a scene
+    change for Work–precision's two; the Stability map's eleven axis controls were 12% of the server's
+    answer to a scene change)."""
+
+    def __init__(self, cls, obj, name, visible, **options):
+        self.obj, self.name, self.visible = obj, name, visible
+        self.selector = isinstance(obj.param[name], param.Selector)
+        bounds = getattr(obj.param[name], "bounds", None)
+        if bounds is not None:
+            options = {"start": bounds[0], "end": bounds[1], **options}
+        self.widget = cls(label=obj.param[name].label, **self._state(), **options)
+        self._syncing = False
+        self.widget.param.watch(self._write, "value")
+        obj.param.watch(self._follow, name)
+        if self.selector:
+            obj.param.watch(self._follow, name, what="objects")
+
+    def _state(self):
+        value = getattr(self.obj, self.name)
+        state = {"value": list(value) if isinstance(value, list) else value}
+        if self.selector:
+            state["options"] = list(self.obj.param[self.name].objects)
+        return state
+
+    def _write(self, event):
+        if not self._syncing:
+            setattr(self.obj, self.name, list(event.new) if isinstance(event.new, list) else event.new)
+
+    def _follow(self, *events):
+        if self.visible():
+            push(self.sync)
+
+    def sync(self):
+        """The widget set to the parameter's value and choices (a select the parameter's new choices
+        leave without its value, set by the widget to the first one meanwhile, writes nothing back)."""
+        self._syncing = True
+        try:
+            self.widget.param.update(**self._state())
+        finally:
+            self._syncing = False
+
+
 class FeatureView(pn.viewable.Viewer):
     """A tab's view: its layout (figures included) is built once, ahead of its first showing (in the
     page's idle time, hidden: `ahead`) or when it is first shown; new data then only replaces the
@@ -38,6 +85,7 @@ class FeatureView(pn.viewable.Viewer):
         self._layout = None
         self._stale = True
         self._opened = False
+        self._widgets = []
 
     @property
     def visible(self):
@@ -63,6 +111,15 @@ class FeatureView(pn.viewable.Viewer):
         self.wanted()
         if self._layout is not None and self._stale:
             self.redraw()
+        if self._widgets:
+            push(lambda: [w.sync() for w in self._widgets])
+
+    def widget(self, cls, obj, name, **options):
+        """A widget of class cls for obj's parameter `name`, following it while this tab is shown
+        and brought up to date when it is shown again (ShownWidget)."""
+        w = ShownWidget(cls, obj, name, lambda: self.visible, **options)
+        self._widgets.append(w)
+        return w.widget
 
     def ahead(self):
         """The steps (callables, each a short piece of the server's time) to take ahead of the tab's

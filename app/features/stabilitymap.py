@@ -376,14 +376,13 @@ class StabilityMapView(FeatureView):
         self.follow(self.study, "h", "T", "theta", "values")
 
         def axis(prefix):
-            p = m.param
-            return pn.Row(pn.widgets.Select.from_param(p[prefix], width=120),
-                          pn.widgets.FloatInput.from_param(p[f"{prefix}_start"], width=110),
-                          pn.widgets.FloatInput.from_param(p[f"{prefix}_stop"], width=110),
-                          pn.widgets.IntInput.from_param(p[f"n{prefix}"], width=100),
-                          pn.widgets.Checkbox.from_param(p[f"{prefix}_log"], margin=(30, 10, 10, 10)))
+            return pn.Row(self.widget(pn.widgets.Select, m, prefix, width=120),
+                          self.widget(pn.widgets.FloatInput, m, f"{prefix}_start", width=110),
+                          self.widget(pn.widgets.FloatInput, m, f"{prefix}_stop", width=110),
+                          self.widget(pn.widgets.IntInput, m, f"n{prefix}", width=100),
+                          self.widget(pn.widgets.Checkbox, m, f"{prefix}_log", margin=(30, 10, 10, 10)))
 
-        return pn.Column(self.text, pn.widgets.Select.from_param(m.param.measure, width=200), axis("x"), axis("y"),
+        return pn.Column(self.text, self.widget(pn.widgets.Select, m, "measure", width=200), axis("x"), axis("y"),
                          row, status, self.since, self.box, self.failures, sizing_mode="stretch_width")
 
     def wanted(self):

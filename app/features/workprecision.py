@@ -23,7 +23,7 @@ from cosymp.scenes import SCENES
 
 from ..jobs import Job, Note
 from ..memory import MB
-from ..plotting import FLOOR, figure, legend_outside, note, pane, push, rule, source, table
+from ..plotting import FLOOR, figure, legend_outside, note, pane, rule, source, table
 from ..study import theta_for
 from .base import Feature, FeatureView
 
@@ -561,37 +561,13 @@ def run_controls(job, start_label, before_start=None):
             note(status))
 
 
-class MethodsChoice:
-    """A measurement's methods, chosen among those that apply to the scene. The widget follows the
-    measurement only while its tab is shown, and catches up when the tab is next shown (`sync`):
-    BokehJS renders a MultiChoice anew (Choices.js) for each change of its options or value, and a
-    scene change changes both, in two of them, 78 ms of the browser's main thread with the tab
-    hidden (a profile of eight scene changes: 620 of the 1,180 ms spent applying their messages)."""
-
-    def __init__(self, job, visible):
-        self.job = job
-        self.visible = visible
-        self.widget = pn.widgets.MultiChoice(label="Methods", options=list(job.param.methods.objects),
-                                             value=list(job.methods), sizing_mode="stretch_width")
-        self.widget.param.watch(lambda e: setattr(self.job, "methods", list(e.new)), "value")
-        job.param.watch(self._follow, "methods")
-        job.param.watch(self._follow, "methods", what="objects")
-
-    def _follow(self, *events):
-        if self.visible():
-            push(self.sync)
-
-    def sync(self):
-        self.widget.param.update(options=list(self.job.param.methods.objects), value=list(self.job.methods))
-
-
 class WorkPrecisionView(FeatureView):
     NAME = "workprecision"
 
     def layout(self):
         m, lh = self.state.measure, self.state.long
         wide = {"sizing_mode": "stretch_width"}
-        self.choices = [MethodsChoice(job, lambda: self.visible) for job in (m, lh)]
+        choices = [self.widget(pn.widgets.MultiChoice, job, "methods", sizing_mode="stretch_width") for job in (m, lh)]
         wp_row, wp_status = run_controls(m, "Start work–precision")
         long_row, long_status = run_controls(lh, "Start long horizons", self._long_figures)
         self.wp_plots = [WorkPrecisionPlot(key, title, m.open_row) for key, title in
@@ -609,21 +585,16 @@ class WorkPrecisionView(FeatureView):
         self.follow(lh, "rows", "capped")
         return pn.Column(
             note(WP_TEXT.format(steps=f"{WP_MAX_STEPS:,}")),
-            pn.Row(self.choices[0].widget, pn.widgets.FloatInput.from_param(m.param.T, width=140), **wide),
+            pn.Row(choices[0], pn.widgets.FloatInput.from_param(m.param.T, width=140), **wide),
             pn.widgets.Checkbox.from_param(m.param.peers),
             wp_row, wp_status, self.wp_failed, self.wp_hint, self.wp_box,
             rule(),
             note(LONG_TEXT),
-            pn.Row(self.choices[1].widget,
+            pn.Row(choices[1],
                    pn.widgets.FloatInput.from_param(lh.param.h, format="0.[000000]", width=140),
                    pn.widgets.Select.from_param(lh.param.T_max, width=140), **wide),
             long_row, long_status, self.long_capped, self.long_failed, self.long_box,
             **wide)
-
-    def shown(self):
-        super().shown()
-        if self._layout is not None:
-            push(lambda: [c.sync() for c in self.choices])
 
     def wanted(self):
         m = self.state.measure
