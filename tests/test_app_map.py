@@ -64,8 +64,7 @@ def test_the_axis_controls_follow_the_scene_when_their_tab_is_shown_and_write_wh
     s.view = "map"
     view.shown()
     assert (x_axis.value, list(x_axis.options), measure.value) == (m.x, m.param.x.objects, m.measure)
-    for w in layout.select(pn.widgets.FloatInput):
-        assert w.value in (m.x_start, m.x_stop, m.y_start, m.y_stop)
+    assert [w.value for w in layout.select(pn.widgets.FloatInput)] == [m.x_start, m.x_stop, m.y_start, m.y_stop]
     cells.value = 12
     assert m.nx == 12
     x_axis.value = "h"
