@@ -3,7 +3,7 @@
    Same formulas, loops and generic dense solve as cosymp/kernels (loops.py, families.py,
    linear.py, linalg.py) and cosymp/scenes, so a ratio measures the compilers, not the
    algorithms: linear scenes step by the step's matrix (M, Q, s) built once per step
-   (propagate_matrix), the others by the family's member step with Newton (propagate_members).
+   (propagate_matrix), the others by the family's member step with Newton (propagate_one).
    One build per scene, one entry point per family:
 
      -DSCENE=DECAYING|DAMPED|MODULATED|CHARGED|KAPITZA  -DNDOF=n -DNCOEF=k -DLINEAR=0|1
@@ -858,7 +858,7 @@ INLINE double lmatrix(int family, const Family *D, const Work *W,
 
 #endif /* LINEAR */
 
-/* ---- loops.py: propagate_matrix (linear scenes) and propagate_members (the others) ---- */
+/* ---- loops.py: propagate_matrix (linear scenes) and propagate_one (the others) ---- */
 
 /* the loop's arguments; done receives the steps completed */
 typedef struct {

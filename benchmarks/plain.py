@@ -10,7 +10,7 @@ splittings loop over their coefficients (aba864, on modulated only, turns H0 exa
 cosymp's loops are timed against them:
 
 * step: `simulate` from the scene's initial state, recording the final state only (the member
-  loop, kernels.loops.propagate_members);
+  loop of one trajectory, kernels.loops.propagate_one);
 * fused: `Drive` with max |H + p_t| (kernels.survey), against the plain loop that also
   evaluates H after every step and keeps max |H + p_t|.
 

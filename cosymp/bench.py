@@ -26,7 +26,7 @@ import numpy as np
 from .errors import CosympError, InputError
 from .integrate import MAX_RECORDED, Setup, get_scene, initial_states
 from .kernels.families import NEWTON, OK, OVERFLOW, SINGULAR
-from .kernels.loops import energies, propagate_matrix, propagate_members
+from .kernels.loops import energies, propagate_matrix, propagate_one
 from .kernels.registry import family
 from .methods import METHODS
 from .methods import method as get_method
@@ -118,7 +118,7 @@ class _Numba(_Runner):
         # bench_ref.c's algorithm: the step matrix on linear scenes, whatever the ensemble size (a
         # family without a mirror is timed as a single trajectory runs: member by member)
         mirrored = family(setup.data).mirror(setup.data) is not None
-        self.kernel = propagate_matrix if setup.scene.kernel.linear and mirrored else propagate_members
+        self.kernel = propagate_matrix if setup.scene.kernel.linear and mirrored else propagate_one
 
     def _run(self):
         return self.kernel(self.setup.data, self.setup.P, 0.0, self.h, self.Z, self.PT, self.nsteps, 1,

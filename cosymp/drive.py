@@ -26,7 +26,6 @@ from .integrate import (
     start_pt,
 )
 from .kernels.families import OK
-from .kernels.loops import energies
 from .kernels.survey import ACC, ENV, WANT_H, WANT_MAPS, survey
 
 CHUNK = 1 << 18
@@ -132,7 +131,7 @@ class Drive:
             out["vol_min"] = out["vol_max"] = np.full(bins, math.nan)
         return out
 
-    def _call(self, steps, env, tb, stride, Trec, Zrec, PTrec, dZrec, F):
+    def _call(self, steps, env, tb, stride, Trec, Zrec, PTrec, dZrec, F, H):
         """One call of the fused loop from the run's current state: (status, k, in_tangent)."""
         s = self.setup
         ends = (self.t0 + self.done * self.h, self.t0 + (self.done + steps) * self.h)
@@ -140,7 +139,7 @@ class Drive:
         out = np.zeros((1, 3), dtype=np.int64)
         survey(s.data, s.P, NO_ROWS, self.t0, self.done, self.h, self.Z[None], self.PT[None], self._sum[None],
                self._comp[None], steps, self.every, self.want, self.width, self.acc[None], env, tb, self._G[None],
-               self._gstate[None], out, scaled, False, stride, Trec, Zrec, PTrec, dZrec, F)
+               self._gstate[None], out, scaled, False, stride, Trec, Zrec, PTrec, dZrec, F, H)
         return out[0]
 
     def record(self, steps, stride, increments=False):
@@ -161,15 +160,13 @@ class Drive:
                              f"({MAX_RECORDED:.0e} values): pass a larger stride")
         Trec, Zrec, PTrec = np.empty(K), np.empty((K, N, m)), np.empty((K, N))
         dZrec = np.empty((K, N, m)) if increments else np.empty((0, N, m))
-        F = np.full((K - 1, 3), np.nan)
+        F, H = np.full((K - 1, 3), np.nan), np.empty((K, N))
         began = time.perf_counter()
         status, k, in_tangent = self._call(steps, np.empty((0, len(ENV))), np.empty(0), stride, Trec, Zrec, PTrec,
-                                           dZrec, F)
+                                           dZrec, F, H)
         wall = time.perf_counter() - began
         kept = K if status == OK else k // stride + 1
-        H = np.empty((kept, N))
-        energies(self.setup.P, Trec[:kept], Zrec[:kept], H)
-        traj = Trajectory(self.setup, self.h, stride, Trec[:kept], Zrec[:kept], PTrec[:kept], H, int(k), wall,
+        traj = Trajectory(self.setup, self.h, stride, Trec[:kept], Zrec[:kept], PTrec[:kept], H[:kept], int(k), wall,
                           dZrec[:kept] if increments else None)
         self.done += k
         self.t = self.t0 + self.done * self.h
@@ -210,7 +207,7 @@ def concat(parts):
 
 def _no_records(N, m):
     """survey's stride and records for a call that records nothing."""
-    return 1, np.empty(0), np.empty((0, N, m)), np.empty((0, N)), np.empty((0, N, m)), NO_FIGURES
+    return 1, np.empty(0), np.empty((0, N, m)), np.empty((0, N)), np.empty((0, N, m)), NO_FIGURES, np.empty((0, N))
 
 
 def batchable(setup):

@@ -77,6 +77,29 @@ def test_fused_run_takes_the_steps_of_simulate(scene, method):
     assert np.array_equal(d.Z, tr.z[-1]) and np.array_equal(d.PT, tr.pt[-1])
 
 
+@pytest.mark.parametrize("scene,method", [p for p in PAIRS if not SCENES[p[0]].kernel.linear])
+def test_each_member_of_an_ensemble_is_its_own_single_run(scene, method):
+    """simulate runs an ensemble of a nonlinear scene through the fused loop (member 0 in its own
+    registers, the others through the arrays) and one trajectory through the single-trajectory
+    loop (kernels.loops.propagate_one): each member's records, increments, p_t and H are its own
+    run's to 64 ulps of their size, at a stride that does not divide the steps (kapitza, the one
+    nonlinear scene: the states and H identical, member 0's p_t within an ulp; not bit for bit,
+    since the same step compiled in two loops may contract its products differently)."""
+    s = Setup.make(scene, method)
+    h = s.scene.h
+    z0 = nearby_states(s.start[0], 1e-3, 2)
+    ensemble = simulate(s, h, STEPS * h, z0=z0, stride=5, increments=True)
+    assert ensemble.z.shape[1] == 3
+    for i in range(3):
+        one = simulate(s, h, STEPS * h, z0=z0[i:i + 1], stride=5, increments=True)
+        scale = np.max(np.abs(one.z))
+        energy = max(1.0, np.max(np.abs(one.H)))
+        np.testing.assert_array_equal(ensemble.t, one.t)
+        for got, own, size in ((ensemble.z, one.z, scale), (ensemble.increments[1:], one.increments[1:], scale),
+                               (ensemble.pt, one.pt, energy), (ensemble.H, one.H, energy)):
+            np.testing.assert_allclose(got[:, i], own[:, 0], rtol=0, atol=64 * np.finfo(float).eps * size)
+
+
 @pytest.mark.parametrize("scene,method", [p for p in PAIRS if p[1] in ("midpoint", "rk4", "gauss4", "leapfrog", "boris")])
 def test_envelopes_match_numpy_reductions(scene, method):
     s = Setup.make(scene, method)

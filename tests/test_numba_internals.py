@@ -88,15 +88,15 @@ def test_stack_arrays_and_borrowed_arrays_compile_and_hold_their_values():
 
 def test_simulate_calls_the_compiled_entry_point_with_the_dispatchers_result():
     from cosymp import integrate
-    from cosymp.kernels.loops import propagate_members
+    from cosymp.kernels.loops import propagate_one
 
     setup = integrate.Setup.make("kapitza", "rk4")
     run = integrate.simulate(setup, 0.01, 0.1)
-    entry = integrate._ENTRIES.get((propagate_members, "rk4", type(setup.P)))
-    assert entry is not None and entry is not propagate_members, \
+    entry = integrate._ENTRIES.get((propagate_one, "rk4", type(setup.P)))
+    assert entry is not None and entry is not propagate_one, \
         changed("Dispatcher.overloads or CompileResult.entry_point (simulate fell back to the dispatcher)", "entry")
     Z, PT = integrate.initial_states(setup), np.empty(1)
     K = len(run.t)
     rec = (np.empty(K), np.empty((K, 1, 2)), np.empty((K, 1)), np.empty((0, 1, 2)), np.empty((K, 1)))
-    assert propagate_members(setup.data, setup.P, 0.0, 0.01, Z, PT, K - 1, 1, *rec, False, True) == (0, K - 1)
+    assert propagate_one(setup.data, setup.P, 0.0, 0.01, Z, PT, K - 1, 1, *rec, False, True) == (0, K - 1)
     assert np.array_equal(rec[1], run.z) and np.array_equal(rec[2], run.pt) and np.array_equal(rec[4], run.H)

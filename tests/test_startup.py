@@ -9,12 +9,12 @@ SCRIPT = """
 import json, time
 t0 = time.perf_counter()
 from cosymp import Setup, simulate
-from cosymp.kernels.loops import propagate_matrix, propagate_members
+from cosymp.kernels.loops import propagate_matrix, propagate_one
 t1 = time.perf_counter()
 simulate(Setup.make("damped", "midpoint"), 0.1, 50.0)
 simulate(Setup.make("kapitza", "midpoint"), 0.01, 1.0)
 t2 = time.perf_counter()
-stats = [propagate_matrix.stats, propagate_members.stats]
+stats = [propagate_matrix.stats, propagate_one.stats]
 print(json.dumps({"import_s": t1 - t0, "first_run_s": t2 - t1,
                   "hits": sum(sum(s.cache_hits.values()) for s in stats),
                   "misses": sum(sum(s.cache_misses.values()) for s in stats)}))

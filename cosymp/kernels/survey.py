@@ -1,8 +1,8 @@
 """The fused driver's compiled loop: step, form each step's tangent map, reduce the diagnostics.
 
 One pass per call, nothing stored per step. The members take member steps, as
-kernels.loops.propagate_members does, so a fused run's states are those of `simulate`, on a
-linear scene too (stepping by the step matrix instead gave p_t through its quadratic form
+kernels.loops.propagate_one does, so a fused run's states are those of `simulate` (which runs an
+ensemble of a nonlinear scene through this loop), on a linear scene too (stepping by the step matrix instead gave p_t through its quadratic form
 z.Q z/2, whose round-off grows with the spread of Q's entries: the splittings' Q, read off by
 polarization, made |H + p_t| of the SRKN11b splitting on damped grow to 5e-3 by gamma t = 40 with
 unscaled steps, and 1000x the member steps' round-off with scaled ones). Member 0's one-step
@@ -15,7 +15,7 @@ these is also reduced to per-bin minima and maxima over bins of `width` steps. T
 states Z and p_t PT are advanced in place; a call may also record them at a stride, with the
 figures of each recorded state (a comparison's plots), and stores nothing else per step.
 
-Arguments of the loop (_fused): D, P, t0, h, Z, PT, nsteps as kernels.loops.propagate_members
+Arguments of the loop (_fused): D, P, t0, h, Z, PT, nsteps as kernels.loops.propagate_matrix
 takes them; first: the steps are numbered from `first`, at times t0 + (first + k) h, and S, Cc:
 p_t's compensated sum and its compensation, carried from call to call, so that a run cut into
 calls takes the same steps as one call; every: form member 0's tangent map at the steps k with
@@ -26,13 +26,13 @@ acc: running maxima (ACC_*), updated in place; env: (bins, len(ENV)) per-bin red
 call (bin b holds steps b*width .. (b+1)*width - 1; rows preset by the caller), tb (bins,) the
 time after each bin's first step; G: the growth product (m x m, or 0 x 0 for none) and gstate
 its (log scale, exponent, 1.0 while finite) as in diagnostics.MapGrowth; stride, Trec, Zrec,
-PTrec, dZrec: records as kernels.loops.propagate_members makes them (record j is this call's
+PTrec, dZrec: records as kernels.loops.propagate_matrix makes them (record j is this call's
 step j*stride, record 0 its start, the last its last step; none where Trec is empty), and F
 (records - 1, 3): per record j, |det M - 1| and ||M^T J M - J|| of the map of the step from
 record j (with every = stride, the steps mapped are the records'), and the paper's volume
 estimator of the step into record j + 1 (diagnostics.paper_volume_form's entry j), where F has
-rows. It returns (status, k, in_tangent): k steps completed, and whether a failure came from the
-tangent map's complex step.
+rows. It returns (status, k, in_tangent, records made): k steps completed, and whether a failure
+came from the tangent map's complex step.
 """
 import math
 
@@ -63,6 +63,7 @@ from .loops import (
     _accept,
     _add,
     _advance,
+    _energies,
     _finite,
     _record,
     _record_start,
@@ -294,7 +295,7 @@ def _flush(env, tb, b, t, bin_):
 @njit(**INLINE)
 def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, env, tb, G,
            gstate, scaled, stride, Trec, Zrec, PTrec, dZrec, F):
-    """Member steps, as kernels.loops.propagate_members takes them (so a run's states are those
+    """Member steps, as kernels.loops.propagate_one takes them (so a run's states are those
     of `simulate`), and member 0's tangent map (_tangent) at the mapped steps. The figures are
     reduced in local variables and a stack copy of the growth product, written back once per
     call (stored into the arrays every step, they cost 6-10 ns a step: the compiler must assume
@@ -314,9 +315,10 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
     volume = Z.shape[0] >= m + 2
     records = Trec.shape[0] > 0
     figures = F.shape[0] > 0
+    rec = 0
     if records:
         _record_start(t0 + first * h, Z, PT, Trec, Zrec, PTrec, dZrec, m)
-    rec = 1
+        rec = 1
     u = len(D.offsets)
     reusable = _reusable(D)
     end = u - 1 if D.offsets[u - 1] == 1.0 else -1
@@ -423,7 +425,7 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
             _copy(A, G, m)
         gstate[0], gstate[1] = gscale, gexp
         gstate[2] = 1.0 if growing else 0.0
-    return status, done, in_tangent
+    return status, done, in_tangent, rec
 
 
 def with_values(P, row):
@@ -442,31 +444,37 @@ def _with_values(P, row):
 
 @njit(**JIT)
 def survey(D, P, R, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, env, tb, G,
-           gstate, status, scaled, start, stride, Trec, Zrec, PTrec, dZrec, F):
+           gstate, status, scaled, start, stride, Trec, Zrec, PTrec, dZrec, F, Hrec):
     """B = len(Z) runs of the fused loop for the scene (_fused) in one call, its arrays borrowed.
 
     Run b advances the members Z[b] (p_t PT[b], its compensated sum S[b] and compensation Cc[b])
     with the scene's parameters P, or R[b] where R has rows (a batch over parameter sets: one
     compiled call for a sweep's grid, no Python per point; scenes whose parameters are all
     floats), and reduces into acc[b], G[b], gstate[b]; bins (env, tb) and records (stride, Trec, Zrec,
-    PTrec, dZrec, F) are run 0's (a batch asks for none). With `start`, each run starts from its state at t0
-    with p_t = -H (START where H is not finite there). status[b] = (status, steps completed, 1
-    if the failure came from the tangent map's complex step)."""
-    D, P, R, Z, PT, S, Cc, acc, env, tb, G, gstate, status, Trec, Zrec, PTrec, dZrec, F = borrow(
-        (D, P, R, Z, PT, S, Cc, acc, env, tb, G, gstate, status, Trec, Zrec, PTrec, dZrec, F))
+    PTrec, dZrec, F) are run 0's (a batch asks for none), and so is Hrec: H of each recorded state, where
+    it has rows. With `start`, each run's members start from their states at t0 with p_t = -H (START
+    where H is not finite there). status[b] = (status, steps completed, 1 if the failure came from
+    the tangent map's complex step)."""
+    D, P, R, Z, PT, S, Cc, acc, env, tb, G, gstate, status, Trec, Zrec, PTrec, dZrec, F, Hrec = borrow(
+        (D, P, R, Z, PT, S, Cc, acc, env, tb, G, gstate, status, Trec, Zrec, PTrec, dZrec, F, Hrec))
     Ce = coef_table(D, P)
     zs = vectors(P, 1, 0.0)[0]
     for b in range(Z.shape[0]):
         Pb = with_values(P, R[b]) if R.shape[0] > 0 else P
         if start:
             e, up, down = coef_at(Pb, t0 + first * h, Ce)
-            H0 = energy_at(Pb, Ce, Z[b, 0], zs, e, up, down)
-            if not np.isfinite(H0):
+            failed = False
+            for i in range(Z.shape[1]):
+                H0 = energy_at(Pb, Ce, Z[b, i], zs, e, up, down)
+                failed |= not np.isfinite(H0)
+                PT[b, i] = S[b, i] = -H0
+                Cc[b, i] = 0.0
+            if failed:
                 status[b, 0], status[b, 1], status[b, 2] = START, 0, 0
                 continue
-            PT[b, 0] = S[b, 0] = -H0
-            Cc[b, 0] = 0.0
-        st, k, tangent_failed = _fused(D, Pb, t0, first, h, Z[b], PT[b], S[b], Cc[b], nsteps,
-                                       every, want, width, acc[b], env, tb, G[b], gstate[b], scaled, stride,
-                                       Trec, Zrec, PTrec, dZrec, F)
+        st, k, tangent_failed, rec = _fused(D, Pb, t0, first, h, Z[b], PT[b], S[b], Cc[b], nsteps,
+                                            every, want, width, acc[b], env, tb, G[b], gstate[b], scaled,
+                                            stride, Trec, Zrec, PTrec, dZrec, F)
         status[b, 0], status[b, 1], status[b, 2] = st, k, tangent_failed
+        if b == 0 and Hrec.shape[0] > 0:
+            _energies(Pb, Trec[:rec], Zrec[:rec], Hrec[:rec], Ce, zs)
