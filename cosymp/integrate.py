@@ -176,16 +176,15 @@ _NO_ROWS, _NO_ENV, _NO_TB = np.empty((0, 0)), np.empty((0, len(ENV))), np.empty(
 _NO_GROWTH, _NO_FIGURES = np.empty((1, 0, 0)), np.empty((0, 3))
 
 
-def _entry(kernel, setup, args):
+def _entry(kernel, setup, args, steps_at):
     """The compiled loop for these arguments, called without numba's dispatch (which types every
     argument on every call: 1.5 us, more than a short run's steps). On the first call of a key the
-    loop is loaded or compiled by a zero-step call, untimed; the arguments' types never change
+    loop is loaded or compiled by a call with 0 steps (args[steps_at]), untimed; the arguments' types never change
     for a key (arrays made here, float64 and C-contiguous)."""
     key = (kernel, setup.method.name, type(setup.P))
     fn = _ENTRIES.get(key)
     if fn is None:
-        steps = 10 if kernel is survey else 6  # where the number of steps goes
-        kernel(*args[:steps], 0, *args[steps + 1:])
+        kernel(*args[:steps_at], 0, *args[steps_at + 1:])
         compiled = kernel.overloads.get(tuple(kernel.typeof_pyval(a) for a in args))
         fn = _ENTRIES[key] = kernel if compiled is None else compiled.entry_point
     return fn
@@ -225,7 +224,7 @@ def simulate(setup, h, T, z0=None, stride=None, increments=False, t0=0.0, pt0=No
         kernel = propagate_matrix if N > 1 else propagate_one
         args = (setup.data, setup.P, t0, h, Z, PT, steps, int(stride), Trec, Zrec, PTrec, dZrec, H, scaled,
                 pt0 is None)
-        loop = _entry(kernel, setup, args)
+        loop = _entry(kernel, setup, args, 6)
         start = time.perf_counter()
         status, done = loop(*args)
     else:
@@ -233,7 +232,7 @@ def simulate(setup, h, T, z0=None, stride=None, increments=False, t0=0.0, pt0=No
         args = (setup.data, setup.P, _NO_ROWS, t0, 0, h, Z[None], PT[None], PT.copy()[None], np.zeros((1, N)),
                 steps, 0, 0, 0, np.zeros((1, len(ACC))), _NO_ENV, _NO_TB, _NO_GROWTH, np.zeros((1, 3)), out, scaled,
                 pt0 is None, int(stride), Trec, Zrec, PTrec, dZrec, _NO_FIGURES, H)
-        loop = _entry(survey, setup, args)
+        loop = _entry(survey, setup, args, 10)
         start = time.perf_counter()
         loop(*args)
         status, done = int(out[0, 0]), int(out[0, 1])

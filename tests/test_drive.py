@@ -16,6 +16,7 @@ from cosymp.diagnostics import (
     tangent_maps,
 )
 from cosymp.drive import Drive
+from cosymp.errors import RunError
 from cosymp.integrate import Setup, simulate
 from cosymp.kernels.survey import _least, _most, defects, symplecticity
 from cosymp.methods import METHODS
@@ -98,6 +99,33 @@ def test_each_member_of_an_ensemble_is_its_own_single_run(scene, method):
         for got, own, size in ((ensemble.z, one.z, scale), (ensemble.increments[1:], one.increments[1:], scale),
                                (ensemble.pt, one.pt, energy), (ensemble.H, one.H, energy)):
             np.testing.assert_allclose(got[:, i], own[:, 0], rtol=0, atol=64 * np.finfo(float).eps * size)
+
+
+def test_a_nonlinear_ensemble_fails_where_its_first_member_fails():
+    """Kapitza's midpoint at a step far beyond the drive period, so that Newton fails
+    (test_failures), each member with its own p_t (no start): the ensemble's run stops at the
+    first step any member's own run fails, with that run's message, and keeps every record before
+    it, each its member's own."""
+    s = Setup.make("kapitza", "midpoint", {"a": 1.0, "nu": 100.0, "q0": 3.0})
+    z0 = nearby_states(s.start[0], 1e-2, 2)
+    pt0 = np.array([0.5, -1.0, 2.0])
+    own = []
+    for i in range(3):
+        with pytest.raises(RunError) as single:
+            simulate(s, 0.3, 60.0, z0=z0[i:i + 1], pt0=pt0[i], stride=2)
+        own.append(single.value)
+    first = min(own, key=lambda e: e.step)
+    with pytest.raises(RunError) as info:
+        simulate(s, 0.3, 60.0, z0=z0, pt0=pt0, stride=2)
+    err = info.value
+    assert str(err) == str(first) and err.step == first.step > 0
+    part = err.partial
+    assert len(part.t) == first.step // 2 + 1
+    for i, e in enumerate(own):
+        kept = len(part.t)
+        for got, mine in ((part.z, e.partial.z), (part.pt, e.partial.pt), (part.H, e.partial.H)):
+            size = max(1.0, np.max(np.abs(mine[:kept])))
+            np.testing.assert_allclose(got[:, i], mine[:kept, 0], rtol=0, atol=64 * np.finfo(float).eps * size)
 
 
 @pytest.mark.parametrize("scene,method", [p for p in PAIRS if p[1] in ("midpoint", "rk4", "gauss4", "leapfrog", "boris")])

@@ -359,6 +359,8 @@ def propagate_one(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, 
     ensemble of a nonlinear scene runs through the fused loop (kernels.survey), which steps its
     members the same way: a member loop here too cost 11% of each (scene, family)'s compile and
     ran no faster (kapitza's 64-member ensembles, 79 ns per member step with rk4 in both)."""
+    if Z.shape[0] != 1:
+        raise ValueError("propagate_one steps one trajectory: Z must have one row")
     return _run(_one_loop, D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, Hrec, scaled, start)
 
 

@@ -1,8 +1,9 @@
 """The fused driver's compiled loop: step, form each step's tangent map, reduce the diagnostics.
 
 One pass per call, nothing stored per step. The members take member steps, as
-kernels.loops.propagate_one does, so a fused run's states are those of `simulate` (which runs an
-ensemble of a nonlinear scene through this loop), on a linear scene too (stepping by the step matrix instead gave p_t through its quadratic form
+kernels.loops.propagate_one does, so a fused run's states are those of `simulate`'s single
+trajectories and of its ensembles of a nonlinear scene (which it runs through this loop), on a
+linear scene too (stepping by the step matrix instead gave p_t through its quadratic form
 z.Q z/2, whose round-off grows with the spread of Q's entries: the splittings' Q, read off by
 polarization, made |H + p_t| of the SRKN11b splitting on damped grow to 5e-3 by gamma t = 40 with
 unscaled steps, and 1000x the member steps' round-off with scaled ones). Member 0's one-step
@@ -10,8 +11,8 @@ tangent map M_k (the step matrix on a linear scene, a complex step of the member
 otherwise, in the step's scaled coordinates as kernels.loops.tangent_matrix and tangent_complex
 give it) feeds the running maxima of |det M_k - 1| and of the symplecticity defect, and the
 growth product; H + p_t of member 0 feeds its running maximum; with 2n + 2 members, members
-1..2n+1 give the paper's volume estimator det[X^1 ... X^(2n+1)] of their increments; and each of
-these is also reduced to per-bin minima and maxima over bins of `width` steps. The members'
+1..2n+1 give the paper's volume estimator det[X^1 ... X^(2n+1)] of their increments (for bins or
+per-record figures); and each of these is also reduced to per-bin minima and maxima over bins of `width` steps. The members'
 states Z and p_t PT are advanced in place; a call may also record them at a stride, with the
 figures of each recorded state (a comparison's plots), and stores nothing else per step.
 
@@ -323,9 +324,9 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
     m = 2 * ndof(P)
     n = m // 2
     X = np.empty((m + 1, m + 1))
-    volume = Z.shape[0] >= m + 2
     records = Trec.shape[0] > 0
     figures = F.shape[0] > 0
+    volume = Z.shape[0] >= m + 2 and (width > 0 or figures)  # the paper's estimator, for bins or figures
     rec = 0
     if records:
         _record_start(t0 + first * h, Z, PT, Trec, Zrec, PTrec, dZrec, m)
