@@ -179,8 +179,8 @@ _NO_GROWTH, _NO_FIGURES = np.empty((1, 0, 0)), np.empty((0, 3))
 def _entry(kernel, setup, args, steps_at):
     """The compiled loop for these arguments, called without numba's dispatch (which types every
     argument on every call: 1.5 us, more than a short run's steps). On the first call of a key the
-    loop is loaded or compiled by a call with 0 steps (args[steps_at]), untimed; the arguments' types never change
-    for a key (arrays made here, float64 and C-contiguous)."""
+    loop is loaded or compiled by a call with 0 steps (args[steps_at]), untimed; the arguments'
+    types never change for a key (arrays made here, float64 and C-contiguous)."""
     key = (kernel, setup.method.name, type(setup.P))
     fn = _ENTRIES.get(key)
     if fn is None:

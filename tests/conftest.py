@@ -22,23 +22,6 @@ def pytest_sessionstart(session):
         assert not compiler.failed, compiler.failed
 
 
-# The longest modules first (wall seconds of each in a two-process run on the slower 2-core machine,
-# 2026-11-29: 207, 183, 118, 60), the others after them in file order: the README's command
-# (`-n 2 --dist loadfile --no-loadscope-reorder`) hands each process the next module in this order
-# when it is free, so the run does not end on one long module in one process while the other is
-# idle (xdist's own order, most tests first, started the load test last: the other process then
-# sat idle for up to a minute).
-LONGEST_FIRST = ("test_app_e2e.py", "test_load.py", "test_app_teaching.py", "test_report.py")
-
-
-def pytest_collection_modifyitems(items):
-    def rank(item):
-        name = item.path.name
-        return LONGEST_FIRST.index(name) if name in LONGEST_FIRST else len(LONGEST_FIRST)
-
-    items.sort(key=rank)
-
-
 def pairs(methods=None, scenes=None, linear_only=False):
     """(scene, method, theta) triples: every method on every scene it applies to."""
     out = []
