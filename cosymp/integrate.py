@@ -10,7 +10,6 @@ from . import warm
 from .errors import InputError, RunError, as_number, quoted
 from .kernels.families import NEWTON, OK, OVERFLOW, SINGULAR, START
 from .kernels.loops import energies, propagate_matrix, propagate_one
-from .kernels.survey import ACC, ENV, survey
 from .methods import method as get_method
 from .scenes import SCENES
 
@@ -170,21 +169,15 @@ def _none(N, m):
     return np.empty((0, N, m))
 
 
-# survey's arguments that a run of simulate leaves empty: no parameter rows, bins, growth product
-# or figures.
-_NO_ROWS, _NO_ENV, _NO_TB = np.empty((0, 0)), np.empty((0, len(ENV))), np.empty(0)
-_NO_GROWTH, _NO_FIGURES = np.empty((1, 0, 0)), np.empty((0, 3))
-
-
-def _entry(kernel, setup, args, steps_at):
+def _entry(kernel, setup, args):
     """The compiled loop for these arguments, called without numba's dispatch (which types every
     argument on every call: 1.5 us, more than a short run's steps). On the first call of a key the
-    loop is loaded or compiled by a call with 0 steps (args[steps_at]), untimed; the arguments'
-    types never change for a key (arrays made here, float64 and C-contiguous)."""
+    loop is loaded or compiled by a zero-step call, untimed; the arguments' types never change
+    for a key (arrays made here, float64 and C-contiguous)."""
     key = (kernel, setup.method.name, type(setup.P))
     fn = _ENTRIES.get(key)
     if fn is None:
-        kernel(*args[:steps_at], 0, *args[steps_at + 1:])
+        kernel(*args[:6], 0, *args[7:])
         compiled = kernel.overloads.get(tuple(kernel.typeof_pyval(a) for a in args))
         fn = _ENTRIES[key] = kernel if compiled is None else compiled.entry_point
     return fn
@@ -210,6 +203,13 @@ def simulate(setup, h, T, z0=None, stride=None, increments=False, t0=0.0, pt0=No
     if K * per_record > MAX_RECORDED:
         raise InputError(f"recording {K} states of {N} trajectories exceeds the memory cap "
                          f"({MAX_RECORDED:.0e} values): pass a larger stride")
+    if N > 1 and not setup.scene.kernel.linear:
+        # An ensemble of a nonlinear scene: the fused driver's records, with no figures (the same
+        # member steps as propagate_one's).
+        from .drive import Drive  # drive builds on this module
+
+        return Drive(setup, h, z0=Z, pt0=pt0, t0=t0, every=0, energy=False, maps=False).record(
+            steps, int(stride), increments)[0]
     PT = np.empty(N)
     if pt0 is not None:
         PT[:] = pt0
@@ -217,25 +217,15 @@ def simulate(setup, h, T, z0=None, stride=None, increments=False, t0=0.0, pt0=No
     dZrec = np.empty((K, N, m)) if increments else _none(N, m)
     t0, h = float(t0), float(h)
     scaled = setup.scene.needs_scaling(setup.P, max(abs(t0), abs(t0 + steps * h)))
-    if N == 1 or setup.scene.kernel.linear:
-        # An ensemble of a linear scene steps by one matrix per step, shared by its members; a
-        # single trajectory by member steps, which cost it 1.1-3.6x less than building the step's
-        # matrix (no matrix products; measured on every linear scene and family).
-        kernel = propagate_matrix if N > 1 else propagate_one
-        args = (setup.data, setup.P, t0, h, Z, PT, steps, int(stride), Trec, Zrec, PTrec, dZrec, H, scaled,
-                pt0 is None)
-        loop = _entry(kernel, setup, args, 6)
-        start = time.perf_counter()
-        status, done = loop(*args)
-    else:
-        out = np.zeros((1, 3), dtype=np.int64)
-        args = (setup.data, setup.P, _NO_ROWS, t0, 0, h, Z[None], PT[None], PT.copy()[None], np.zeros((1, N)),
-                steps, 0, 0, 0, np.zeros((1, len(ACC))), _NO_ENV, _NO_TB, _NO_GROWTH, np.zeros((1, 3)), out, scaled,
-                pt0 is None, int(stride), Trec, Zrec, PTrec, dZrec, _NO_FIGURES, H)
-        loop = _entry(survey, setup, args, 10)
-        start = time.perf_counter()
-        loop(*args)
-        status, done = int(out[0, 0]), int(out[0, 1])
+    # An ensemble of a linear scene steps by one matrix per step, shared by its members; a single
+    # trajectory by member steps, which cost it 1.1-3.6x less than building the step's matrix (no
+    # matrix products; measured on every linear scene and family).
+    kernel = propagate_matrix if N > 1 else propagate_one
+    args = (setup.data, setup.P, t0, h, Z, PT, steps, int(stride), Trec, Zrec, PTrec, dZrec, H, scaled,
+            pt0 is None)
+    loop = _entry(kernel, setup, args)
+    start = time.perf_counter()
+    status, done = loop(*args)
     wall = time.perf_counter() - start
     if status == START:
         raise InputError(START_FAILED.format(t0=t0))

@@ -89,7 +89,6 @@ def test_stack_arrays_and_borrowed_arrays_compile_and_hold_their_values():
 def test_simulate_calls_the_compiled_entry_point_with_the_dispatchers_result():
     from cosymp import integrate
     from cosymp.kernels.loops import propagate_one
-    from cosymp.kernels.survey import survey
 
     setup = integrate.Setup.make("kapitza", "rk4")
     run = integrate.simulate(setup, 0.01, 0.1)
@@ -103,7 +102,3 @@ def test_simulate_calls_the_compiled_entry_point_with_the_dispatchers_result():
     assert np.array_equal(rec[1], run.z) and np.array_equal(rec[2], run.pt) and np.array_equal(rec[4], run.H)
     with pytest.raises(ValueError, match="one trajectory"):
         propagate_one(setup.data, setup.P, 0.0, 0.01, np.repeat(Z, 2, axis=0), np.empty(2), 1, 1, *rec, False, True)
-    integrate.simulate(setup, 0.01, 0.1, z0=np.repeat(Z, 3, axis=0))  # a nonlinear ensemble: the fused loop
-    entry = integrate._ENTRIES.get((survey, "rk4", type(setup.P)))
-    assert entry is not None and entry is not survey, \
-        changed("Dispatcher.overloads or CompileResult.entry_point (simulate fell back to the dispatcher)", "entry")
