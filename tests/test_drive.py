@@ -253,15 +253,16 @@ def test_the_map_defects_of_one_degree_of_freedom_are_the_general_ones():
     a scaling by c has det c^2 and M^T J M = c^2 J; a NaN stays NaN in every figure."""
     rng = np.random.default_rng(16)
     B = np.empty((2, 2))
+    one, two = Setup.make("damped", "midpoint").P, Setup.make("charged", "midpoint").P  # m = 2 and 4
     for M in [rng.normal(size=(2, 2)) for _ in range(50)] + [np.array([[0.6, -0.8], [0.8, 0.6]]), 3.0 * np.eye(2)]:
-        dev, symp, rel = defects(M, B, 2)
+        dev, symp, rel = defects(M, B, one)
         assert (symp, rel) == symplecticity(M, 2)
         assert close(dev, abs(np.linalg.det(M) - 1.0), 1e-12, 4e-16 * (1.0 + np.abs(M).max() ** 2))
-    assert defects(3.0 * np.eye(2), B, 2) == (8.0, 8.0, 8.0 / 9.0)
-    for m in (2, 4):
+    assert defects(3.0 * np.eye(2), B, one) == (8.0, 8.0, 8.0 / 9.0)
+    for m, P in ((2, one), (4, two)):
         M = np.eye(m)
         M[0, 1] = math.nan
-        assert all(math.isnan(v) for v in defects(M, np.empty((m, m)), m))
+        assert all(math.isnan(v) for v in defects(M, np.empty((m, m)), P))
 
 
 def test_a_bin_without_a_sampled_map_says_so():

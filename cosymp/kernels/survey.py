@@ -48,7 +48,6 @@ from .dispatch import (
     _INLINE,
     _IR_INLINE,
     INLINE,
-    IR_INLINE,
     JIT,
     coef,
     energy,
@@ -103,8 +102,10 @@ def _least(a, b):
 # compile (side by side: damped x Theta 35.0 -> 31.2 s, kapitza x Explicit 74.3 -> 65.6 s). Their
 # loops then stay rolled where m is 2 or 4; the diagnosed steps that run them measured 0.98-1.03x
 # (damped and modulated midpoint with the growth product, charged, kapitza's volume estimator).
-# defects and grow stay inlined in numba's IR: the one-degree-of-freedom defects and the growth
-# product run at every step of a map's or a sweep's run.
+# defects and grow, which run at every step of a map's or a sweep's run, take the scene's
+# parameters P instead of m, as the state helpers of kernels.loops do: their size is a constant of
+# the scene (2 ndof), so each is compiled once per scene with its loops unrolled, where inlined in
+# numba's IR they were typed and lowered again in every fused loop.
 
 
 @njit(**INLINE)
@@ -178,12 +179,13 @@ def symplecticity(M, m):
     return worst, _relative(worst, size)
 
 
-@njit(**IR_INLINE)
-def defects(M, B, m):
-    """(|det M - 1|, symplecticity(M)) of a one-step map M (B: scratch). With one degree of
+@njit(**INLINE)
+def defects(M, B, P):
+    """(|det M - 1|, symplecticity(M)) of a one-step map M of the scene of P (B: scratch). With one degree of
     freedom M^T J M = det(M) J, so the defect is |det M - 1|: both from the two products that
     symplecticity forms (its figures bit for bit; det to round-off of the LU's), which halves the
     maps' cost of a damped midpoint step (run_summary's figures 39 -> 35 ns/step)."""
+    m = 2 * ndof(P)
     if m == 2:
         x, y = M[0, 0] * M[1, 1], M[1, 0] * M[0, 1]
         dev = abs((x - y) - 1.0)
@@ -194,11 +196,13 @@ def defects(M, B, m):
     return abs(determinant(B, m) - 1.0), symp, rel
 
 
-@njit(**IR_INLINE)
-def grow(M, e, A, B, m, scale, exponent):
+@njit(**INLINE)
+def grow(M, e, A, B, P, scale, exponent):
     """A <- M A, scaled by an exact power of two 2^-x once its largest entry leaves [2^-RANGE,
     2^RANGE] (x ln 2 added to `scale`: no logarithm per step); A is kept in the scaled coordinates
-    of `exponent` (see diagnostics.MapGrowth). Returns (finite, scale, exponent)."""
+    of `exponent` (see diagnostics.MapGrowth); M, A, B are m x m for the scene of P. Returns (finite,
+    scale, exponent)."""
+    m = 2 * ndof(P)
     n = m // 2
     shift = e - exponent
     if shift != 0:
@@ -243,9 +247,10 @@ def _energy_after(D, P, C, end, Ce, t, z):
     return energy(P, Ce, 0, z)
 
 
-@njit(**IR_INLINE)
-def _increment_row(X, i, z, old, h, n):
+@njit(**INLINE)
+def _increment_row(X, i, z, old, h, P):
     """Row i of the volume estimator's matrix: the increment of a member in (q, t, p)."""
+    n = ndof(P)
     for r in range(n):
         X[i, r] = z[r] - old[r]
         X[i, n + 1 + r] = z[n + r] - old[n + r]
@@ -294,7 +299,7 @@ def _tangent_impl(D, P, C, tk, h, zs, pt, M, TW):
     return complex_step
 
 
-@njit(**IR_INLINE)
+@njit(**INLINE)
 def _flush(env, tb, b, t, bin_):
     """Bin b's time and figures (min and max of H + p_t and of the volume estimator, max of the
     defects) into tb and env (rows preset to the identities of min and max)."""
@@ -322,14 +327,13 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
     MB = matrices(P, 3, 0.0)
     M, B, A = MB[0], MB[1], MB[2]
     m = 2 * ndof(P)
-    n = m // 2
     X = np.empty((m + 1, m + 1))
     records = Trec.shape[0] > 0
     figures = F.shape[0] > 0
     volume = Z.shape[0] >= m + 2 and (width > 0 or figures)  # the paper's estimator, for bins or figures
     rec = 0
     if records:
-        _record_start(t0 + first * h, Z, PT, Trec, Zrec, PTrec, dZrec, m)
+        _record_start(t0 + first * h, Z, PT, Trec, Zrec, PTrec, dZrec, P)
         rec = 1
     u = len(D.offsets)
     reusable = _reusable(D)
@@ -357,7 +361,7 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
         if mapped:
             for r in range(m):
                 zs[r] = y[r]
-            _rescale(zs, n, e, down, up)
+            _rescale(zs, P, e, down, up)
             status = _tangent(D, P, C, tk, h, zs, pt0, M, TW)
             if status != OK:
                 done, in_tangent = k, True
@@ -366,13 +370,13 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
         recording = records and ((k + 1) % stride == 0 or k + 1 == nsteps)
         for r in range(m):
             yold[r] = y[r]
-        _rescale(y, n, e, down, up)
+        _rescale(y, P, e, down, up)
         status, dpt = step(D, P, C, tk, h, y, -0.0, W)
         if want & WANT_H:
             hnew = _energy_after(D, P, C, end, Ce, t1 - tau, y)
-        _rescale(y, n, e, up, down)
+        _rescale(y, P, e, up, down)
         sum_, comp = _add(S0, C0, dpt)
-        if status == OK and not _finite(sum_, y, m):
+        if status == OK and not _finite(sum_, y, P):
             status = OVERFLOW
         if status != OK:
             for r in range(m):
@@ -381,18 +385,18 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
             break
         S0, C0, pt0 = sum_, comp, sum_ - comp
         if recording:
-            _record(rec, 0, y, yold, pt0, Zrec, PTrec, dZrec, m)
+            _record(rec, 0, y, yold, pt0, Zrec, PTrec, dZrec, P)
         for i in range(1, Z.shape[0]):
             for r in range(m):
                 old[r] = Z[i, r]
                 z[r] = old[r]
-            status, sum_, comp = _advance(D, P, C, tk, h, z, W, e, up, down, S[i], Cc[i], m)
-            status = _accept(status, i, z, old, sum_ - comp, Z, PT, rec, recording, Zrec, PTrec, dZrec, m)
+            status, sum_, comp = _advance(D, P, C, tk, h, z, W, e, up, down, S[i], Cc[i])
+            status = _accept(status, i, z, old, sum_ - comp, Z, PT, rec, recording, Zrec, PTrec, dZrec, P)
             if status != OK:
                 break
             S[i], Cc[i] = sum_, comp
             if volume and 1 <= i <= m + 1:
-                _increment_row(X, i - 1, z, old, h, n)
+                _increment_row(X, i - 1, z, old, h, P)
         if status != OK:
             done = k
             break
@@ -401,12 +405,12 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
             hmax = _most(hmax, abs(hext))
         dev = symp = 0.0
         if mapped and want & WANT_MAPS:
-            dev, symp, rel = defects(M, B, m)
+            dev, symp, rel = defects(M, B, P)
             dmax, smax, rmax = _most(dmax, dev), _most(smax, symp), _most(rmax, rel)
             if figures:
                 F[k // every, 0], F[k // every, 1] = dev, symp
         if mapped and growing:
-            growing, gscale, gexp = grow(M, e, A, B, m, gscale, gexp)
+            growing, gscale, gexp = grow(M, e, A, B, P, gscale, gexp)
         vol = determinant(X, m + 1) if volume and (width > 0 or recording and figures) else math.nan
         if recording:
             Trec[rec] = t1
@@ -429,7 +433,7 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
                 bin_[5] = _most(bin_[5], symp)
     if width > 0:
         _flush(env, tb, b, tbin, bin_)
-    _store(Z, PT, 0, y, pt0, m)
+    _store(Z, PT, 0, y, pt0, P)
     S[0], Cc[0] = S0, C0
     acc[0], acc[1], acc[2], acc[3] = hmax, dmax, smax, rmax
     if G.shape[0] > 0:
