@@ -33,7 +33,8 @@ INLINE = {**JIT, "forceinline": True}
 # count; LLVM then unrolls it at run time and marks the remainder loop "do not unroll", so once
 # inlined with m = 2 it stays a rolled loop through memory (measured: the composition's step
 # matrix 133 -> 50 ns, a 2 x 2 solve and products). Inlined in numba's IR, the loop is first
-# optimized where its size is a constant.
+# optimized where its size is a constant. Where that size is the state's (2 ndof), a helper takes
+# the scene's parameters instead and reads ndof, a constant, so it can stay INLINE (kernels.loops).
 IR_INLINE = {**JIT, "inline": "always"}
 # Overload bodies are closures that compile into their caller's cached library; caching them on
 # their own would key distinct closures by one qualified name.

@@ -104,10 +104,13 @@ def _factors(e):
 # P rather than the state's size: m = 2 ndof(P) is a constant of the scene, so each is compiled once
 # per scene (per (scene, family) for _advance), its loops unrolled, and cached. Inlined in numba's IR
 # (kernels.dispatch.IR_INLINE, which a size received as an argument needs) they were typed and
-# lowered again in every loop of every (scene, family): with survey's defects and grow so too, a
-# cold compile takes 18% less (`python -m cosymp compile` on 2 cores, 627 -> 513 s; side by side,
-# damped x Theta, Explicit and kapitza x Gauss 179 -> 156 s), and the steps measured the same
-# (damped single runs, ensembles and fused runs with maps, kapitza gauss4: 0.96-1.04x).
+# lowered again in every loop of every (scene, family): with survey's defects and grow so too, the
+# cold compile inside CI took 627 -> 507 s on 2 cores (side by side, damped x Theta, Explicit and
+# kapitza x Gauss 179 -> 156 s), and the steps measured the same (damped single runs, ensembles and
+# fused runs with maps, kapitza gauss4: 0.94-1.04x).
+# LITERALS: numba types a constant int argument as a literal and compiles a separate copy of a
+# function called with it (and, while it infers a variable's type, one for the literal the variable
+# starts as): the loops pass these helpers int64 values only.
 @njit(**INLINE)
 def _rescale(z, P, e, qf, pf):
     """q <- q qf, p <- p pf in place for a state z of the scene of P, unless e = 0 (qf, pf powers
@@ -215,7 +218,7 @@ def _advance(D, P, C, tk, h, z, W, e, up, down, S, Cc):
     status, dpt = step(D, P, C, tk, h, z, -0.0, W)
     _rescale(z, P, e, up, down)
     s, c = _add(S, Cc, dpt)
-    return status, s, c
+    return np.int64(status), s, c  # an explicit family's status is a literal OK (LITERALS)
 
 
 @njit(**INLINE)
@@ -278,7 +281,7 @@ def _matrix_loop(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, s
     reusable = _reusable(D)
     _record_start(t0, Z, PT, Trec, Zrec, PTrec, dZrec, P)
     S, Cc = PT.copy(), np.zeros_like(PT)
-    rec = 1
+    rec = np.int64(1)  # int64 from the start, as the helpers' other int arguments (LITERALS)
     prev = 0
     tau = 0.0
     up = down = 1.0
@@ -291,7 +294,7 @@ def _matrix_loop(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, s
             quad = apply_matrix(Z, i, M, Q, old, zs, z, P, e, up, down)
             _rescale(z, P, e, up, down)
             sum_, comp = _add(S[i], Cc[i], -(0.5 * quad + s))
-            status = _accept(OK, i, z, old, sum_ - comp, Z, PT, rec, recording, Zrec, PTrec, dZrec, P)
+            status = _accept(np.int64(OK), i, z, old, sum_ - comp, Z, PT, rec, recording, Zrec, PTrec, dZrec, P)
             if status != OK:
                 return status, k, rec
             S[i], Cc[i] = sum_, comp
@@ -323,7 +326,7 @@ def _one_loop(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, scal
         z[r] = Z[0, r]
     pt = PT[0]
     S, Cc = pt, 0.0
-    rec = 1
+    rec, first = np.int64(1), np.int64(0)  # record 1, member 0: int64, not literals (LITERALS)
     due = stride
     prev = 0
     tau = 0.0
@@ -337,16 +340,16 @@ def _one_loop(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, scal
         if status == OK and not _finite(sum_, z, P):
             status = OVERFLOW
         if status != OK:
-            _store(Z, PT, 0, old, pt, P)
+            _store(Z, PT, first, old, pt, P)
             return status, k, rec
         S, Cc, pt = sum_, comp, sum_ - comp
         due -= 1
         if due == 0 or k + 1 == nsteps:
-            _record(rec, 0, z, old, pt, Zrec, PTrec, dZrec, P)
+            _record(rec, first, z, old, pt, Zrec, PTrec, dZrec, P)
             Trec[rec] = t0 + (k + 1) * h
             rec += 1
             due = stride
-    _store(Z, PT, 0, z, pt, P)
+    _store(Z, PT, first, z, pt, P)
     return OK, nsteps, rec
 
 

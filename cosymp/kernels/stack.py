@@ -3,8 +3,9 @@
 The compiled loops keep their small vectors and matrices here rather than on the heap: the
 compiler then sees every element at a constant offset of a private buffer and keeps it in
 registers (measured: the theta step's matrices in 6.8 ns instead of 22.8 ns on the heap).
-A stack array lives as long as the compiled function that declares it; all kernels inline
-their callees in numba's IR, so the declaring function is always the loop itself.
+A stack array lives as long as the compiled function that declares it; every function that
+declares some is inlined in numba's IR (kernels.dispatch.IR_INLINE), so the declaring function is
+always the loop itself (functions that only receive such arrays may be compiled on their own).
 """
 import numpy as np
 from llvmlite import ir

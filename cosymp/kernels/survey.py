@@ -105,7 +105,8 @@ def _least(a, b):
 # defects and grow, which run at every step of a map's or a sweep's run, take the scene's
 # parameters P instead of m, as the state helpers of kernels.loops do: their size is a constant of
 # the scene (2 ndof), so each is compiled once per scene with its loops unrolled, where inlined in
-# numba's IR they were typed and lowered again in every fused loop.
+# numba's IR they were typed and lowered again in every fused loop. _flush (no size) is compiled
+# once for all.
 
 
 @njit(**INLINE)
@@ -331,10 +332,10 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
     records = Trec.shape[0] > 0
     figures = F.shape[0] > 0
     volume = Z.shape[0] >= m + 2 and (width > 0 or figures)  # the paper's estimator, for bins or figures
-    rec = 0
+    rec, member0 = np.int64(0), np.int64(0)  # int64, not literals (kernels.loops, LITERALS)
     if records:
         _record_start(t0 + first * h, Z, PT, Trec, Zrec, PTrec, dZrec, P)
-        rec = 1
+        rec = np.int64(1)
     u = len(D.offsets)
     reusable = _reusable(D)
     end = u - 1 if D.offsets[u - 1] == 1.0 else -1
@@ -344,8 +345,8 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
         _copy(G, A, m)
     gscale, gexp = gstate[0], int(gstate[1])
     bin_ = np.empty(6)  # the current bin's figures (as env's columns)
-    b, tbin = -1, 0.0
-    status, done, in_tangent = OK, nsteps, False
+    b, tbin = np.int64(-1), 0.0
+    status, done, in_tangent = np.int64(OK), nsteps, False
     for r in range(m):
         y[r] = Z[0, r]
     pt0, S0, C0 = PT[0], S[0], Cc[0]
@@ -385,7 +386,7 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
             break
         S0, C0, pt0 = sum_, comp, sum_ - comp
         if recording:
-            _record(rec, 0, y, yold, pt0, Zrec, PTrec, dZrec, P)
+            _record(rec, member0, y, yold, pt0, Zrec, PTrec, dZrec, P)
         for i in range(1, Z.shape[0]):
             for r in range(m):
                 old[r] = Z[i, r]
@@ -433,7 +434,7 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
                 bin_[5] = _most(bin_[5], symp)
     if width > 0:
         _flush(env, tb, b, tbin, bin_)
-    _store(Z, PT, 0, y, pt0, P)
+    _store(Z, PT, member0, y, pt0, P)
     S[0], Cc[0] = S0, C0
     acc[0], acc[1], acc[2], acc[3] = hmax, dmax, smax, rmax
     if G.shape[0] > 0:
