@@ -38,8 +38,8 @@ from .dispatch import (
     rotate,
     vecpot,
 )
-from .linalg import solve
-from .stack import matrices, stage_flat, stage_square, stage_vectors, vectors
+from .linalg import factor, solve, substitute
+from .stack import matrices, stage_flat, stage_pivots, stage_square, stage_vectors, vectors
 
 OK, OVERFLOW, NEWTON, SINGULAR = 0, 1, 2, 3
 START = -1  # H is not finite at the start: no step taken
@@ -207,13 +207,76 @@ def explicit_step(D, P, C, t, h, z, pt, W):
 @njit(**IR_INLINE)
 def gauss_work(D, P, z):
     return (stage_vectors(D, P, z), stage_vectors(D, P, z), vectors(P, 2, z), stage_flat(D, P, z),
-            matrices(P, 1, z)[0], stage_square(D, P, z))
+            matrices(P, 1, z)[0], stage_square(D, P, z), stage_pivots(D, P))
+
+
+@njit(**IR_INLINE)
+def _gauss_residual(D, P, C, h, z, Zs, Fs, F, y, g):
+    """F = z - Z_i + h sum_j A_ij f(Z_j) for every stage i."""
+    n = ndof(P)
+    m = 2 * n
+    s = len(D.b)
+    for j in range(s):
+        for r in range(m):
+            y[r] = Zs[j, r]
+        grad(P, C, j, y, g)
+        for r in range(n):
+            Fs[j, r] = g[n + r]
+            Fs[j, n + r] = -g[r]
+    for i in range(s):
+        for r in range(m):
+            acc = z[r] - Zs[i, r]
+            for j in range(s):
+                acc += h * D.A[i * s + j] * Fs[j, r]
+            F[i * m + r] = acc
+
+
+@njit(**IR_INLINE)
+def _gauss_newton(D, P, C, h, Zs, F, y, Hm, Jm, piv):
+    """The Newton correction of the stages: Jm (the residual's Jacobian, negated) factored, F
+    overwritten with Jm^-1 F and added to them. Returns False if Jm is singular."""
+    n = ndof(P)
+    m = 2 * n
+    s = len(D.b)
+    for j in range(s):
+        for r in range(m):
+            y[r] = Zs[j, r]
+        hess(P, C, j, y, Hm)
+        for i in range(s):
+            a = h * D.A[i * s + j]
+            for r in range(n):
+                for c in range(m):
+                    Jm[i * m + r, j * m + c] = -a * Hm[n + r, c]
+                    Jm[i * m + n + r, j * m + c] = a * Hm[r, c]
+    for r in range(s * m):
+        Jm[r, r] += 1.0
+    if not factor(Jm, piv, s * m):
+        return False
+    _gauss_correct(D, P, Zs, F, Jm, piv)
+    return True
+
+
+@njit(**IR_INLINE)
+def _gauss_correct(D, P, Zs, F, Jm, piv):
+    m = 2 * ndof(P)
+    s = len(D.b)
+    substitute(Jm, piv, F, s * m, 1)
+    for i in range(s):
+        for r in range(m):
+            Zs[i, r] += F[i * m + r]
 
 
 @njit(**INLINE)
 def gauss_step(D, P, C, t, h, z, pt, W):
-    """Collocation: stage values Z_i = z + h sum_j A_ij f(Z_j, t + c_j h), solved by Newton."""
-    Zs, Fs, V, F, Hm, Jm = W
+    """Collocation: stage values Z_i = z + h sum_j A_ij f(Z_j, t + c_j h), solved by Newton.
+
+    On a linear scene one Newton step solves the stages exactly but for the factorization's
+    round-off, and that error is systematic: the same matrix, or one changing slowly, every step.
+    H + p_t then drifted linearly (gauss6 on damped, gamma = 2e-4, h = 0.1, 2e6 steps from 16
+    nearby starts: the mean of H + p_t at the end -4.8e-13, 12.8 standard errors from 0). A second
+    step with the same factors, from the residual, refines the stages to the residual's own
+    round-off (mean -2.3e-14, 0.5 standard errors)."""
+    Zs, Fs, V, F, Hm, Jm, piv = W
     y, g = V[0], V[1]
     n = ndof(P)
     m = 2 * n
@@ -221,44 +284,25 @@ def gauss_step(D, P, C, t, h, z, pt, W):
     for i in range(s):
         for r in range(m):
             Zs[i, r] = z[r]
-    prev = np.inf
-    status = NEWTON
-    for it in range(NEWTON_MAX):
-        for j in range(s):
-            for r in range(m):
-                y[r] = Zs[j, r]
-            grad(P, C, j, y, g)
-            for r in range(n):
-                Fs[j, r] = g[n + r]
-                Fs[j, n + r] = -g[r]
-        for i in range(s):
-            for r in range(m):
-                acc = z[r] - Zs[i, r]
-                for j in range(s):
-                    acc += h * D.A[i * s + j] * Fs[j, r]
-                F[i * m + r] = acc
-        for j in range(s):
-            for r in range(m):
-                y[r] = Zs[j, r]
-            hess(P, C, j, y, Hm)
-            for i in range(s):
-                a = h * D.A[i * s + j]
-                for r in range(n):
-                    for c in range(m):
-                        Jm[i * m + r, j * m + c] = -a * Hm[n + r, c]
-                        Jm[i * m + n + r, j * m + c] = a * Hm[r, c]
-        for r in range(s * m):
-            Jm[r, r] += 1.0
-        if not solve(Jm, F, s * m, 1):
-            status = SINGULAR
-            break
-        for i in range(s):
-            for r in range(m):
-                Zs[i, r] += F[i * m + r]
-        done, prev = _newton_done(F, s * m, z, m, prev)
-        if done or is_linear(P):
+    if is_linear(P):
+        _gauss_residual(D, P, C, h, z, Zs, Fs, F, y, g)
+        status = SINGULAR
+        if _gauss_newton(D, P, C, h, Zs, F, y, Hm, Jm, piv):
+            _gauss_residual(D, P, C, h, z, Zs, Fs, F, y, g)
+            _gauss_correct(D, P, Zs, F, Jm, piv)
             status = OK
-            break
+    else:
+        prev = np.inf
+        status = NEWTON
+        for it in range(NEWTON_MAX):
+            _gauss_residual(D, P, C, h, z, Zs, Fs, F, y, g)
+            if not _gauss_newton(D, P, C, h, Zs, F, y, Hm, Jm, piv):
+                status = SINGULAR
+                break
+            done, prev = _newton_done(F, s * m, z, m, prev)
+            if done:
+                status = OK
+                break
     if status == OK:
         dpt = -0.0
         for j in range(s):

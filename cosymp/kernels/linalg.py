@@ -39,6 +39,56 @@ def solve(A, B, n, k):
     return True
 
 
+@njit(**IR_INLINE)
+def factor(A, piv, n):
+    """LU factors of A's leading n x n block in place, as `solve` eliminates (partial pivoting: at
+    column c, row c was swapped with row piv[c]; the multipliers below the diagonal, the pivots'
+    reciprocals on it), for solves against right-hand sides known one after another
+    (`substitute`). Returns False if a pivot is exactly zero."""
+    for c in range(n):
+        p = c
+        big = abs(A[c, c])
+        for i in range(c + 1, n):
+            v = abs(A[i, c])
+            if v > big:
+                big = v
+                p = i
+        if big == 0.0:
+            return False
+        piv[c] = p
+        if p != c:
+            for j in range(n):
+                A[c, j], A[p, j] = A[p, j], A[c, j]
+        inv = 1.0 / A[c, c]
+        for i in range(c + 1, n):
+            f = A[i, c] * inv
+            A[i, c] = f
+            if f != 0.0:
+                for j in range(c + 1, n):
+                    A[i, j] -= f * A[c, j]
+        A[c, c] = inv
+    return True
+
+
+@njit(**IR_INLINE)
+def substitute(A, piv, B, n, k):
+    """Overwrite the leading n x k block of B with A^-1 B, A and piv from `factor`: every row swap
+    first (the multipliers moved with their rows), then the same operations on each row of B as
+    `solve`'s, so the same result."""
+    for c in range(n):
+        if piv[c] != c:
+            _swap_rows(B, c, piv[c], k)
+    for c in range(n):
+        for i in range(c + 1, n):
+            f = A[i, c]
+            if f != 0.0:
+                _axpy_rows(B, i, c, -f, k)
+    for c in range(n - 1, -1, -1):
+        for j in range(c + 1, n):
+            _axpy_rows(B, c, j, -A[c, j], k)
+        _scale_row(B, c, A[c, c], k)
+
+
 def _swap_rows(B, a, b, k):
     """Swap rows a and b of B (a vector, or k columns)."""
 

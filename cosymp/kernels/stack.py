@@ -87,6 +87,10 @@ def stage_square(D, P, like):
     """A stack matrix (stages * 2n) x (stages * 2n)."""
 
 
+def stage_pivots(D, P):
+    """A stack vector of stages * 2n integers: the row swaps of an LU factorization (linalg.factor)."""
+
+
 def coef_table(D, P):
     """The stack table of time coefficients: one row per time offset of D (at most MAX_OFFSETS),
     and one more column: the row's time while a pending row is still to be computed, NaN once it
@@ -131,6 +135,12 @@ def _stage_matrices(D, P, like):
 def _stage_square(D, P, like):
     sm = 2 * _scene(P).ndof * _stages(D)
     return lambda D, P, like: stack_array((sm, sm), like)
+
+
+@overload(stage_pivots, jit_options=_IR_INLINE, inline="always")
+def _stage_pivots(D, P):
+    sm = 2 * _scene(P).ndof * _stages(D)
+    return lambda D, P: stack_array((sm,), np.int64(0))
 
 
 @overload(coef_table, jit_options=_IR_INLINE, inline="always")
