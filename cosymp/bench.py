@@ -9,7 +9,7 @@ family's registration (kernels.registry: `mirror`). The other pairs get numba fi
 the table says which. Both run the same scene, method, h, initial state and number of steps, recording
 every step, interleaved, and their final states must agree. On linear scenes both sides step
 by the step's matrix (cosymp's ensemble path); `simulate` runs a single trajectory by member
-steps instead, which cost less (kernels.loops.propagate_one).
+steps instead, which cost less, or about as much for Gauss (kernels.loops.propagate_one).
 """
 import ctypes
 import json

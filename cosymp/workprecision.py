@@ -14,8 +14,8 @@ Definitions (also the CSV's):
   or `solve_ivp`), after one untimed warm-up call (which also compiles), repeated while the
   repeats take under `budget` seconds in all (at most MAX_REPEATS).
 - rhs_evals: vector-field evaluations (scipy's nfev; stages x steps for explicit methods);
-  for implicit methods on linear scenes the stage evaluations of the time coefficients (one
-  linear solve per step), NaN where a Newton iteration makes it run-dependent (nonlinear scenes).
+  for implicit methods on linear scenes the stage evaluations of the time coefficients (once a
+  step: the stages' equations are linear), NaN where a Newton iteration makes it run-dependent (nonlinear scenes).
 - H_ext_max_abs: max |H + p_t| over every step (cosymp) or every accepted step (peers).
 - H_scale (drift): the largest |H| at the start and at the horizons so far, the scale of the
   rounding in H + p_t (see `at_roundoff`).

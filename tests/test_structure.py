@@ -111,8 +111,9 @@ def test_naive_theta_is_not_symplectic_by_its_formula(scene, theta):
 
 @pytest.mark.parametrize("case", pairs(linear_only=True), ids=case_id)
 def test_matrix_path_agrees_with_member_path(case):
-    """Linear scenes step by one matrix per step; the general member step (Newton, here one
-    iteration) is an independent implementation of the same method: they agree to round-off."""
+    """Linear scenes step by one matrix per step; the general member step (Newton, here one linear
+    solve, refined once for Gauss) is an independent implementation of the same method: they agree
+    to round-off."""
     from cosymp.integrate import initial_states
     from cosymp.kernels.loops import propagate_matrix
 

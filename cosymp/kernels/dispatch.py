@@ -154,6 +154,7 @@ lwork = _dispatched("lwork", 2, "Stack work arrays of family D's step matrices: 
                     scratch=True)
 ndof = _constant("ndof", "Degrees of freedom n of the scene (z has 2n entries).")
 ncoef = _constant("ncoef", "Length of the scene's time-coefficient vector.")
-is_linear = _constant("linear", "Whether H is quadratic in z, so implicit steps are one linear solve.")
+is_linear = _constant("linear", "Whether H is quadratic in z, so implicit steps solve linear equations (no Newton "
+                      "iteration to convergence).")
 interleaved = _constant("interleaved", "Whether family D's step computes each coefficient row where a stage first "
                         "uses it (kernels.families.row), rather than the loop computing every row before the step.")

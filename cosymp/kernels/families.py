@@ -271,11 +271,10 @@ def gauss_step(D, P, C, t, h, z, pt, W):
     """Collocation: stage values Z_i = z + h sum_j A_ij f(Z_j, t + c_j h), solved by Newton.
 
     On a linear scene one Newton step solves the stages exactly but for the factorization's
-    round-off, and that error is systematic: the same matrix, or one changing slowly, every step.
-    H + p_t then drifted linearly (gauss6 on damped, gamma = 2e-4, h = 0.1, 2e6 steps from 16
-    nearby starts: the mean of H + p_t at the end -4.8e-13, 12.8 standard errors from 0). A second
-    step with the same factors, from the residual, refines the stages to the residual's own
-    round-off (mean -2.3e-14, 0.5 standard errors)."""
+    round-off, which is systematic where the matrix changes slowly from step to step: H + p_t
+    drifted (gauss6 on damped, gamma = 2e-4, h = 0.1, 2e6 steps from 16 nearby starts: the mean of
+    H + p_t at the end -4.8e-13, 12.8 standard errors from 0). A second step with the same factors,
+    from the residual, refines the stages (mean -2.3e-14, 0.5 standard errors; README, round-off)."""
     Zs, Fs, V, F, Hm, Jm, piv = W
     y, g = V[0], V[1]
     n = ndof(P)

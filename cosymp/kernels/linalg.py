@@ -6,20 +6,27 @@ from .dispatch import _IR_INLINE, IR_INLINE
 
 
 @njit(**IR_INLINE)
+def _pivot(A, c, n):
+    """The row, from c on, of column c's largest entry (the first of equals); -1 if all are zero."""
+    p = c
+    big = abs(A[c, c])
+    for i in range(c + 1, n):
+        v = abs(A[i, c])
+        if v > big:
+            big = v
+            p = i
+    return p if big != 0.0 else -1
+
+
+@njit(**IR_INLINE)
 def solve(A, B, n, k):
     """Overwrite the leading n x k block of B with A^-1 B (partial pivoting); A is destroyed.
 
     B is 2-D (k right-hand sides) or 1-D (k = 1). Returns False if a pivot is exactly zero.
     """
     for c in range(n):
-        p = c
-        big = abs(A[c, c])
-        for i in range(c + 1, n):
-            v = abs(A[i, c])
-            if v > big:
-                big = v
-                p = i
-        if big == 0.0:
+        p = _pivot(A, c, n)
+        if p < 0:
             return False
         if p != c:
             for j in range(c, n):
@@ -46,14 +53,8 @@ def factor(A, piv, n):
     reciprocals on it), for solves against right-hand sides known one after another
     (`substitute`). Returns False if a pivot is exactly zero."""
     for c in range(n):
-        p = c
-        big = abs(A[c, c])
-        for i in range(c + 1, n):
-            v = abs(A[i, c])
-            if v > big:
-                big = v
-                p = i
-        if big == 0.0:
+        p = _pivot(A, c, n)
+        if p < 0:
             return False
         piv[c] = p
         if p != c:

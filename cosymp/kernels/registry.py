@@ -27,7 +27,8 @@ def _f64(values):
 
 
 def _implicit(count):
-    """Evaluations of an implicit family: one solve of `count` stages on a linear scene."""
+    """Evaluations of an implicit family on a linear scene: its `count` stages' time coefficients, once a
+    step (Gauss's second, refining correction evaluates no new ones)."""
     return lambda D, linear: float(count(D)) if linear else math.nan
 
 
