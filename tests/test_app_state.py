@@ -143,6 +143,28 @@ def test_the_verdict_calls_a_band_bounded_only_when_the_data_show_it():
     assert "bounded" not in text and f"{growth:.2g}× wider in the run's last tenth" in text
 
 
+def test_the_verdict_calls_a_band_of_round_off_round_off():
+    """gauss6 on charged at h = 0.001: its |H + p_t| is within 10 eps |H| sqrt(N) of its N steps and
+    wanders (its last tenth's maximum several times its first tenth's, more than BAND_GROWTH): the
+    verdict calls it round-off, not a band growing, and with RK4's within the same bound too it says
+    neither method's own error shows. At h = 0.01 RK4 drifts out of it."""
+    s = Study(scene="charged", method="gauss6")
+    assert (s.other, s.h) == ("rk4", 0.001)
+    runs = [e.comparison.run for e in s.results.entries]
+    for run in runs:
+        err, N = np.abs(run.H_ext[:, 0]), len(run.H_ext) - 1
+        assert err.max() <= 10 * np.finfo(float).eps * np.abs(run.H[:, 0]).max() * np.sqrt(N)
+    gauss = np.abs(runs[0].H_ext[:, 0])
+    tenth = len(gauss) // 10
+    assert gauss[-tenth:].max() > common.BAND_GROWTH * gauss[:tenth].max()
+    text = common.verdict(s.results)
+    assert "both methods' |H + p_t| are round-off" in text and "neither method's own error shows" in text
+    assert "wider" not in text and "drifts" not in text
+    s.h = 0.01
+    text = common.verdict(s.results)
+    assert "rk4 drifts; gauss6's |H + p_t| is its steps' rounding" in text and "round-off: within 10" in text
+
+
 def test_values_and_inputs_follow_each_other():
     s = Study(scene="damped")
     s.values = {"gamma": -0.1, "q0": 2.0}
