@@ -165,6 +165,15 @@ def test_the_verdict_calls_a_band_of_round_off_round_off():
     assert "rk4 drifts; gauss6's |H + p_t| is its steps' rounding" in text and "round-off: within 10" in text
 
 
+def test_the_verdict_of_a_run_that_stopped_quotes_what_it_reached():
+    """RK4 stops where damped's q passes the floating-point range (t = 7098 of 7500): the verdict
+    quotes the largest |H + p_t| it reached, not NaN."""
+    s = Study(scene="damped", method="symplectic-euler", other="rk4", h=0.1, T=7500.0, values={"gamma": 0.2})
+    assert np.isnan(s.results.entries[1].comparison.run.H_ext[-1, 0])
+    text = common.verdict(s.results)
+    assert "nan" not in text and "round-off" not in text and "rk4's |H + p_t| (at most 0.00087)" in text
+
+
 def test_values_and_inputs_follow_each_other():
     s = Study(scene="damped")
     s.values = {"gamma": -0.1, "q0": 2.0}

@@ -77,12 +77,12 @@ def verdict(runs):
     drift = np.abs(lr.H_ext[:, 0])
     if rounding and within_roundoff(lr):
         return (f"<p class='verdict'>Up to T = {runs.T:g} both methods' |H + p_t| are round-off (at most {band:.2g} "
-                f"for {html.escape(p)}, {drift.max():.2g} for {html.escape(n)}: within {ROUNDOFF:g} ε |H| √N of N "
+                f"for {html.escape(p)}, {np.nanmax(drift):.2g} for {html.escape(n)}: within {ROUNDOFF:g} ε |H| √N of N "
                 "steps, the size unbiased rounding wanders to): at this h neither method's own error shows. A "
                 "larger h or a longer T separates them.</p>")
     above = np.flatnonzero(drift > band)
     if not above.size:
-        return (f"<p class='verdict'>Up to T = {runs.T:g}, {html.escape(n)}'s |H + p_t| (at most {drift.max():.2g}) "
+        return (f"<p class='verdict'>Up to T = {runs.T:g}, {html.escape(n)}'s |H + p_t| (at most {np.nanmax(drift):.2g}) "
                 f"stays below {what}: at this h and T the error of {html.escape(n)}'s higher order is the smaller. "
                 "Nothing bounds it over longer runs; whether it leaves the band there depends on the scene (the "
                 f"Long run tab measures it).{phase_note(ke, le, bounded)}</p>")
@@ -96,10 +96,10 @@ def verdict(runs):
 
 def within_roundoff(run):
     """Whether a run's max |H + p_t| is within round-off of its N steps, ROUNDOFF eps |H| sqrt(N) (the
-    rule of work-precision's `at_roundoff`)."""
+    rule of work-precision's `at_roundoff`); never where |H| overflowed."""
     steps = len(run.H_ext) - 1
-    scale = float(np.nanmax(np.abs(run.H[:, 0])))
-    return bool(np.nanmax(np.abs(run.H_ext[:, 0])) <= ROUNDOFF * np.finfo(float).eps * scale * np.sqrt(max(steps, 1)))
+    bound = ROUNDOFF * np.finfo(float).eps * float(np.nanmax(np.abs(run.H[:, 0]))) * np.sqrt(max(steps, 1))
+    return bool(np.isfinite(bound) and np.nanmax(np.abs(run.H_ext[:, 0])) <= bound)
 
 
 def phase_note(kept, lost, bounded):
