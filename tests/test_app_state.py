@@ -152,8 +152,9 @@ def test_the_verdict_calls_a_band_of_round_off_round_off():
     assert (s.other, s.h) == ("rk4", 0.001)
     runs = [e.comparison.run for e in s.results.entries]
     for run in runs:
-        err, N = np.abs(run.H_ext[:, 0]), len(run.H_ext) - 1
-        assert err.max() <= 10 * np.finfo(float).eps * np.abs(run.H[:, 0]).max() * np.sqrt(N)
+        assert run.stride == 1 and run.steps == 20000
+        err = np.abs(run.H_ext[:, 0])
+        assert err.max() <= 10 * np.finfo(float).eps * np.abs(run.H[:, 0]).max() * np.sqrt(run.steps)
     gauss = np.abs(runs[0].H_ext[:, 0])
     tenth = len(gauss) // 10
     assert gauss[-tenth:].max() > common.BAND_GROWTH * gauss[:tenth].max()
@@ -162,11 +163,15 @@ def test_the_verdict_calls_a_band_of_round_off_round_off():
     assert "wider" not in text and "drifts" not in text
     s.h = 0.01
     text = common.verdict(s.results)
-    assert "rk4 drifts; gauss6's |H + p_t| is its steps' rounding" in text and "round-off: within 10" in text
+    assert "rk4's is the method's error, gauss6's its steps' rounding" in text
+    assert "round-off: within 10 ε |H| √N of its 2000 steps" in text
+    s.h, s.T = 0.001, 250.0  # 250000 steps, recorded every second one: still both round-off
+    assert s.results.entries[0].comparison.run.stride > 1
+    assert "both methods' |H + p_t| are round-off" in common.verdict(s.results)
 
 
 def test_the_verdict_of_a_run_that_stopped_quotes_what_it_reached():
-    """RK4 stops where damped's q passes the floating-point range (t = 7098 of 7500): the verdict
+    """RK4 stops where damped's q passes the floating-point range, before T = 7500: the verdict
     quotes the largest |H + p_t| it reached, not NaN."""
     s = Study(scene="damped", method="symplectic-euler", other="rk4", h=0.1, T=7500.0, values={"gamma": 0.2})
     assert np.isnan(s.results.entries[1].comparison.run.H_ext[-1, 0])

@@ -49,9 +49,9 @@ def verdict(runs):
     run's last tenth is), or that it has not (yet) at this T. The band is called bounded only when
     the data show it: its maximum over the run's last tenth is at most BAND_GROWTH times that over
     its first tenth (an adiabatic change of the scene can widen it). A band within round-off of its
-    N steps (`within_roundoff`) is called round-off, not wider: unbiased rounding wanders like
-    sqrt(N) (gauss6 on charged at h = 0.001: 2.3e-14, its last tenth's maximum 9.8 times its first
-    tenth's); where both methods' are, the verdict says that neither method's own error shows."""
+    N steps (`within_roundoff`) is called round-off, not wider: rounding accumulates over the steps
+    (gauss6 on charged at h = 0.001: 2.3e-14, its last tenth's maximum 9.8 times its first tenth's);
+    where both methods' are, the verdict says that neither method's own error shows."""
     kept, lost = {}, {}
     for e in runs.entries if runs is not None else ():
         if e.comparison is None:
@@ -70,16 +70,16 @@ def verdict(runs):
     growth = float(np.nanmax(kept_err[-tenth:]) / max(np.nanmax(kept_err[:tenth]), np.finfo(float).tiny))
     rounding = within_roundoff(kr)
     bounded = growth <= BAND_GROWTH or rounding
-    what = (f"{html.escape(p)}'s band ({band:.2g}, round-off: within {ROUNDOFF:g} ε |H| √N of its {len(kept_err) - 1} "
+    what = (f"{html.escape(p)}'s band ({band:.2g}, round-off: within {ROUNDOFF:g} ε |H| √N of its {kr.steps} "
             "steps)" if rounding else
             f"{html.escape(p)}'s bounded band ({band:.2g})" if bounded else
             f"{html.escape(p)}'s band ({band:.2g}, itself {growth:.2g}× wider in the run's last tenth than in its first)")
     drift = np.abs(lr.H_ext[:, 0])
     if rounding and within_roundoff(lr):
-        return (f"<p class='verdict'>Up to T = {runs.T:g} both methods' |H + p_t| are round-off (at most {band:.2g} "
+        return (f"<p class='verdict'>Up to T = {runs.T:g}, both methods' |H + p_t| are round-off (at most {band:.2g} "
                 f"for {html.escape(p)}, {np.nanmax(drift):.2g} for {html.escape(n)}: within {ROUNDOFF:g} ε |H| √N of N "
-                "steps, the size unbiased rounding wanders to): at this h neither method's own error shows. A "
-                "larger h or a longer T separates them.</p>")
+                "steps, the size unbiased rounding reaches): at this h neither method's own error shows. A larger h "
+                "separates them.</p>")
     above = np.flatnonzero(drift > band)
     if not above.size:
         return (f"<p class='verdict'>Up to T = {runs.T:g}, {html.escape(n)}'s |H + p_t| (at most {np.nanmax(drift):.2g}) "
@@ -89,16 +89,14 @@ def verdict(runs):
     end = float(np.nanmax(drift[-max(len(drift) // 10, 1):]))  # not its last value: |H + p_t| oscillates
     return (f"<p class='verdict'>{html.escape(n)}'s |H + p_t| leaves {what} at t ≈ {lr.t[above[0]]:.3g} and ends "
             f"{end / band:.3g}× above it (its maximum over the run's last tenth, to t = {lr.t[-1]:g}): "
-            + (f"{html.escape(n)} drifts; {html.escape(p)}'s |H + p_t| is its steps' rounding, which wanders like √N."
-               if rounding else f"{html.escape(n)} drifts, {html.escape(p)} does not." if bounded else
+            + (f"{html.escape(n)}'s is the method's error, {html.escape(p)}'s its steps' rounding." if rounding else f"{html.escape(n)} drifts, {html.escape(p)} does not." if bounded else
                f"{html.escape(n)} drifts faster than {html.escape(p)}.") + f"{phase_note(ke, le, bounded)}</p>")
 
 
 def within_roundoff(run):
     """Whether a run's max |H + p_t| is within round-off of its N steps, ROUNDOFF eps |H| sqrt(N) (the
     rule of work-precision's `at_roundoff`); never where |H| overflowed."""
-    steps = len(run.H_ext) - 1
-    bound = ROUNDOFF * np.finfo(float).eps * float(np.nanmax(np.abs(run.H[:, 0]))) * np.sqrt(max(steps, 1))
+    bound = ROUNDOFF * np.finfo(float).eps * float(np.nanmax(np.abs(run.H[:, 0]))) * np.sqrt(max(run.steps, 1))
     return bool(np.isfinite(bound) and np.nanmax(np.abs(run.H_ext[:, 0])) <= bound)
 
 
