@@ -147,7 +147,7 @@ def test_the_verdict_calls_a_band_of_round_off_round_off():
     """gauss6 on charged at h = 0.001: its |H + p_t| is within 10 eps |H| sqrt(N) of its N steps and
     wanders (its last tenth's maximum several times its first tenth's, more than BAND_GROWTH): the
     verdict calls it round-off, not a band growing, and with RK4's within the same bound too it says
-    neither method's own error shows. At h = 0.01 RK4 drifts out of it."""
+    neither method's own error shows. At h = 0.01 RK4's is its method's error, far above it."""
     s = Study(scene="charged", method="gauss6")
     assert (s.other, s.h) == ("rk4", 0.001)
     runs = [e.comparison.run for e in s.results.entries]
