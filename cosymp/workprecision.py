@@ -400,8 +400,14 @@ def _growth_points(rows, solver, key):
             break
         if v > 0 and (key != "error" or v > 10 * r["reference_uncertainty"]):
             scale = 1.0 if key == "error" else r.get("H_scale", math.nan)
-            pts.append((r["T"], v, ROUNDOFF * np.finfo(float).eps * scale * math.sqrt(r["steps"])))
+            pts.append((r["T"], v, roundoff_bound(scale, r["steps"])))
     return pts
+
+
+def roundoff_bound(scale, steps):
+    """ROUNDOFF eps scale sqrt(steps): how far unbiased rounding of a value of size `scale` goes in
+    `steps` steps, by `at_roundoff`'s rule."""
+    return ROUNDOFF * np.finfo(float).eps * scale * math.sqrt(steps)
 
 
 def growth_exponent(rows, solver, key="error"):

@@ -7,7 +7,7 @@ import numpy as np
 from cosymp.methods import METHODS
 from cosymp.report.style import pair_colors
 from cosymp.scenes import SCENES
-from cosymp.workprecision import ROUNDOFF
+from cosymp.workprecision import ROUNDOFF, roundoff_bound
 
 from ..plotting import SLOTS, fmt, series, swatch
 
@@ -96,7 +96,7 @@ def verdict(runs):
 def within_roundoff(run):
     """Whether a run's max |H + p_t| is within round-off of its N steps, ROUNDOFF eps |H| sqrt(N) (the
     rule of work-precision's `at_roundoff`); never where |H| overflowed."""
-    bound = ROUNDOFF * np.finfo(float).eps * float(np.nanmax(np.abs(run.H[:, 0]))) * np.sqrt(max(run.steps, 1))
+    bound = roundoff_bound(float(np.nanmax(np.abs(run.H[:, 0]))), max(run.steps, 1))
     return bool(np.isfinite(bound) and np.nanmax(np.abs(run.H_ext[:, 0])) <= bound)
 
 
