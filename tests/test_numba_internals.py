@@ -5,11 +5,12 @@ or rename any of them; this file says which, before a kernel fails in an obscure
 """
 import importlib.metadata
 import inspect
+import re
 
 import numpy as np
 import pytest
 from numba import njit, types
-from numba.core import caching, cgutils
+from numba.core import caching, cgutils, config
 from numba.core.errors import NumbaError
 from numba.extending import overload
 from numba.np import arrayobj
@@ -18,6 +19,7 @@ from packaging.specifiers import SpecifierSet
 
 from cosymp.kernels import cachestamp
 from cosymp.kernels.borrow import borrow
+from cosymp.kernels.dispatch import Vectorizing
 from cosymp.kernels.stack import stack_array
 
 WHERE = {
@@ -25,6 +27,7 @@ WHERE = {
     "stack": "cosymp/kernels/stack.py",
     "borrow": "cosymp/kernels/borrow.py",
     "dispatch": "cosymp/kernels/dispatch.py",
+    "vectorizing": "cosymp/kernels/dispatch.py (Vectorizing)",
     "entry": "cosymp/integrate.py (_entry)",
 }
 
@@ -102,3 +105,39 @@ def test_simulate_calls_the_compiled_entry_point_with_the_dispatchers_result():
     assert np.array_equal(rec[1], run.z) and np.array_equal(rec[2], run.pt) and np.array_equal(rec[4], run.H)
     with pytest.raises(ValueError, match="one trajectory"):
         propagate_one(setup.data, setup.P, 0.0, 0.01, np.repeat(Z, 2, axis=0), np.empty(2), 1, 1, *rec, False, True)
+
+
+def _product_2x2(P, a, b, out):
+    """A 2 x 2 matrix product written out, as a step's small matrices are: straight-line code. The
+    entries are read before any is written (out might alias a or b, and LLVM then keeps the order
+    of loads and stores), as a step reads its state into locals. P: a scene's parameters."""
+    a0, a1, a2, a3 = a[0], a[1], a[2], a[3]
+    b0, b1, b2, b3 = b[0], b[1], b[2], b[3]
+    out[0] = a0 * b0 + a1 * b2
+    out[1] = a0 * b1 + a1 * b3
+    out[2] = a2 * b0 + a3 * b2
+    out[3] = a2 * b1 + a3 * b3
+
+
+def test_cosymps_compiler_vectorizes_for_a_scene_of_two_degrees_of_freedom_only():
+    """Vectorizing turns LLVM's SLP vectorizer on for a compile with the parameters of a scene of
+    two or more degrees of freedom (charged), not one (modulated); numba's own compiler leaves it
+    off (so the check can fail), and numba's setting is what it was before, for the next compile."""
+    from cosymp.integrate import Setup
+
+    options = {"fastmath": {"contract"}, "error_model": "numpy"}
+    before = config.SLP_VECTORIZE
+    ours, plain = njit(pipeline_class=Vectorizing, **options)(_product_2x2), njit(**options)(_product_2x2)
+    a, b = np.array([1.0, 2.0, 3.0, 4.0]), np.array([5.0, 6.0, 7.0, 8.0])
+    vector = re.compile(r"<\d+ x double>")
+    for scene, vectorized in (("charged", True), ("modulated", False)):
+        P = Setup.make(scene, "midpoint").P
+        for fn, expected in ((ours, vectorized), (plain, False)):
+            out = np.empty(4)
+            fn(P, a, b, out)
+            assert np.array_equal(out, (a.reshape(2, 2) @ b.reshape(2, 2)).ravel())
+            ir = fn.inspect_llvm(fn.signatures[-1])
+            assert bool(vector.search(ir)) == expected, changed(
+                f"where the SLP vectorizer's setting is read (config.SLP_VECTORIZE, at optimization): {scene}, "
+                f"{'Vectorizing' if fn is ours else 'numba'}, vector arithmetic {not expected}", "vectorizing")
+    assert config.SLP_VECTORIZE == before, changed("how the SLP vectorizer's setting is kept", "vectorizing")

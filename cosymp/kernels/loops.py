@@ -14,6 +14,7 @@ from .dispatch import (
     INLINE,
     IR_INLINE,
     JIT,
+    Vectorizing,
     coef,
     dhdt,
     energy,
@@ -353,7 +354,7 @@ def _one_loop(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, scal
     return OK, nsteps, rec
 
 
-@njit(**JIT)
+@njit(**JIT, pipeline_class=Vectorizing)
 def propagate_matrix(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, Hrec, scaled, start):
     """Advance the N members of (Z, PT) of a linear scene by nsteps steps of h from t0.
 
