@@ -10,7 +10,7 @@ import re
 import numpy as np
 import pytest
 from numba import njit, types
-from numba.core import caching, cgutils, config
+from numba.core import caching, cgutils
 from numba.core.errors import NumbaError
 from numba.extending import overload
 from numba.np import arrayobj
@@ -119,25 +119,35 @@ def _product_2x2(P, a, b, out):
     out[3] = a2 * b1 + a3 * b3
 
 
-def test_cosymps_compiler_vectorizes_for_a_scene_of_two_degrees_of_freedom_only():
-    """Vectorizing turns LLVM's SLP vectorizer on for a compile with the parameters of a scene of
-    two or more degrees of freedom (charged), not one (modulated); numba's own compiler leaves it
-    off (so the check can fail), and numba's setting is what it was before, for the next compile."""
+_OPTIONS = {"fastmath": {"contract"}, "error_model": "numpy"}
+_product_inlined = njit(forceinline=True, **_OPTIONS)(_product_2x2)
+
+
+def _through_a_callee(P, a, b, out):
+    """The product in a callee inlined by LLVM, as a loop's step is."""
+    _product_inlined(P, a, b, out)
+
+
+def test_cosymps_compiler_vectorizes_one_function_for_a_scene_of_two_degrees_of_freedom():
+    """Vectorizing optimizes the function it compiles with LLVM's SLP vectorizer when its arguments
+    hold the parameters of a scene of two or more degrees of freedom (charged), not one (modulated),
+    and nothing else: the callee first compiled inside it keeps numba's scalar code in its own
+    library (other callers link that one), and numba's own compiler vectorizes neither (so the
+    check can fail)."""
     from cosymp.integrate import Setup
 
-    options = {"fastmath": {"contract"}, "error_model": "numpy"}
-    before = config.SLP_VECTORIZE
-    ours, plain = njit(pipeline_class=Vectorizing, **options)(_product_2x2), njit(**options)(_product_2x2)
+    ours = njit(pipeline_class=Vectorizing, **_OPTIONS)(_through_a_callee)
+    plain = njit(**_OPTIONS)(_through_a_callee)
     a, b = np.array([1.0, 2.0, 3.0, 4.0]), np.array([5.0, 6.0, 7.0, 8.0])
     vector = re.compile(r"<\d+ x double>")
     for scene, vectorized in (("charged", True), ("modulated", False)):
         P = Setup.make(scene, "midpoint").P
-        for fn, expected in ((ours, vectorized), (plain, False)):
+        for fn, expected in ((ours, vectorized), (plain, False), (_product_inlined, False)):
             out = np.empty(4)
             fn(P, a, b, out)
             assert np.array_equal(out, (a.reshape(2, 2) @ b.reshape(2, 2)).ravel())
             ir = fn.inspect_llvm(fn.signatures[-1])
             assert bool(vector.search(ir)) == expected, changed(
-                f"where the SLP vectorizer's setting is read (config.SLP_VECTORIZE, at optimization): {scene}, "
-                f"{'Vectorizing' if fn is ours else 'numba'}, vector arithmetic {not expected}", "vectorizing")
-    assert config.SLP_VECTORIZE == before, changed("how the SLP vectorizer's setting is kept", "vectorizing")
+                f"how a library's final module is optimized (CPUCodeLibrary._optimize_final_module, "
+                f"CPUCodegen._module_pass_manager): {scene}, {fn.py_func.__name__}"
+                f"{' by Vectorizing' if fn is ours else ''}, vector arithmetic {not expected}", "vectorizing")

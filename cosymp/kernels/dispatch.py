@@ -16,8 +16,7 @@ imports neither.
 """
 import inspect
 
-from numba.core import compiler, config
-from numba.core.compiler_lock import global_compiler_lock
+from numba.core import codegen, compiler
 from numba.core.errors import TypingError
 from numba.extending import overload
 
@@ -47,31 +46,56 @@ _IR_INLINE = {k: v for k, v in JIT.items() if k != "cache"}
 _REGISTERED = {}
 
 
+def _ndof(numba_type):
+    """The degrees of freedom of the scene whose parameter tuple has this numba type (1 for any other
+    type: a family's data, an array, a number)."""
+    return getattr(_REGISTERED.get(getattr(numba_type, "instance_class", None)), "ndof", 1)
+
+
+class _WithSLP:
+    """A codegen as one library sees it: module pass managers with LLVM's SLP vectorizer on unless
+    the caller says otherwise (numba's cheap first pass does: off)."""
+
+    def __init__(self, codegen):
+        self._codegen = codegen
+
+    def __getattr__(self, name):
+        return getattr(self._codegen, name)
+
+    def _module_pass_manager(self, **kwargs):
+        kwargs.setdefault("slp_vectorize", True)
+        return self._codegen._module_pass_manager(**kwargs)
+
+
+class _VectorizedLibrary(codegen.JITCodeLibrary):
+    """numba's code library of one compiled function, whose final module (the function with every
+    callee inlined into it) is optimized with the SLP vectorizer. The callees' own libraries, compiled
+    and cached on their own, are not."""
+
+    def _optimize_final_module(self):
+        shared = self._codegen
+        self._codegen = _WithSLP(shared)
+        try:
+            super()._optimize_final_module()
+        finally:
+            self._codegen = shared
+
+
 class Vectorizing(compiler.Compiler):
-    """numba's compiler with LLVM's SLP vectorizer on while it compiles a function for a scene of
-    two or more degrees of freedom, and as it was after. numba turns that pass off for all code
-    (NUMBA_SLP_VECTORIZE = 0); the step-matrix loop of the charged particle multiplies 4 x 4
-    matrices in straight-line code that only it packs into vector instructions, as gcc -O3 does.
-    Measured with `cosymp bench` (fresh caches, one session, the step-matrix loop): charged rk4
-    1.50 -> 0.96x its C mirror, rk8 1.45 -> 0.89, gauss4 1.44 -> 1.09, midpoint 1.06 -> 0.78. Not
-    for one degree of freedom, nor for member steps: there it made steps slower (modulated's
-    step-matrix midpoint 52 -> 63 ns; single runs of blanes-moan6 271 -> 355, charged rk4
-    122 -> 138), and the loops that must agree bit for bit (simulate's and the fused driver's)
-    would round differently. The setting is numba's own, read when a library is optimized, which
-    happens inside the compile; numba compiles one function at a time (its global compiler lock,
-    held here), so no other compile of the process sees it."""
+    """numba's compiler, whose function compiled for a scene of two or more degrees of freedom is
+    optimized with LLVM's SLP vectorizer, which numba leaves off (NUMBA_SLP_VECTORIZE = 0): the
+    charged particle's step-matrix loop multiplies 4 x 4 matrices in straight-line code that only
+    that pass packs into vector instructions, as gcc -O3 does. Only that function's library: numba's
+    setting and every other compile, its callees' included, are left as they are. Measured with
+    `cosymp bench` (README, "cosymp bench"). Not for one degree of freedom, nor for member steps:
+    there the pass made steps slower, and simulate and the fused driver would round differently."""
 
     def _compile_core(self):
-        if not any(getattr(_REGISTERED.get(getattr(a, "instance_class", None)), "ndof", 1) >= 2
-                   for a in self.state.args):
-            return super()._compile_core()
-        with global_compiler_lock:
-            before = config.SLP_VECTORIZE
-            config.SLP_VECTORIZE = 1
-            try:
-                return super()._compile_core()
-            finally:
-                config.SLP_VECTORIZE = before
+        if self.state.library is None and any(_ndof(a) >= 2 for a in self.state.args):
+            self.state.library = _VectorizedLibrary(self.state.targetctx.codegen(),
+                                                    self.state.func_id.func_qualname)
+            self.state.library.enable_object_caching()  # as numba does for a library it creates
+        return super()._compile_core()
 
 
 def register(cls, table):
