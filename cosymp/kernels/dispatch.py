@@ -56,8 +56,8 @@ class _WithSLP:
     """A codegen as one library sees it: module pass managers with LLVM's SLP vectorizer on unless
     the caller says otherwise (numba's cheap first pass does: off)."""
 
-    def __init__(self, codegen):
-        self._codegen = codegen
+    def __init__(self, inner):
+        self._codegen = inner
 
     def __getattr__(self, name):
         return getattr(self._codegen, name)
