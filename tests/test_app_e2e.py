@@ -34,8 +34,8 @@ def test_opens_on_the_first_view_and_a_slider_updates_the_plots(page):
     assert ["steps", steps, steps] in page.numbers()
     expect(page.page.locator("p.verdict")).to_contain_text("rk4 drifts, midpoint does not")
     assert page.page.evaluate("[window.cosymp_bokeh_reads, window.cosymp_bokeh_built, window.cosymp_bokeh_layouts, "
-                              "window.cosymp_bokeh_sends]") == [True] * 4, \
-        "app/static/bokeh_reads.js, bokeh_layouts.js or bokeh_sends.js did not apply"
+                              "window.cosymp_bokeh_sends, window.cosymp_panel_katex]") == [True] * 5, \
+        "app/static/bokeh_reads.js, bokeh_layouts.js, bokeh_sends.js or panel_katex.js did not apply"
     page.page.wait_for_function("() => [...document.fonts].some((f) => f.family.replaceAll('\"', '') === "
                                 "'cosymp-KaTeX_Main' && f.status === 'loaded')", timeout=10_000)
     assert not page.page.evaluate("[...document.fonts].filter((f) => f.status === 'error').map((f) => f.family)")
@@ -502,4 +502,108 @@ def test_the_first_page_s_elements_hold_the_sizes_the_browser_gave_them(page):
     assert [s for s in sizes if (s[1], s[2]) != (s[3], s[4])] == []
     assert page.page.evaluate("""() => [...Bokeh.index.all_views()].filter((v) => v.model.type === "Toolbar"
         && v.shadow_el.querySelector('.bk-tool-overflow') !== null).length""") == 0
+    page.check()
+
+
+EQUATIONS_JS = """() => {
+  // The TeX of every equation typeset in the document (KaTeX keeps it in its MathML), and how many
+  // equation panes seen before kept their first style element (a pane rendered anew drops it).
+  const out = {tex: [], seen: 0, kept: 0};
+  for (const view of Bokeh.index.all_views()) {
+    if (!view.model.type.endsWith("KaTeX") || !view.el.isConnected) continue;
+    out.tex.push(...[...view.shadow_el.querySelectorAll("annotation")].map((a) => a.textContent));
+    const style = view.shadow_el.querySelector("style");
+    if (view.cosymp_test_seen) {
+      out.seen += 1;
+      out.kept += style.dataset.cosympTest === "1" ? 1 : 0;
+    }
+    view.cosymp_test_seen = true;
+    style.dataset.cosympTest = "1";
+  }
+  return out;
+}"""
+TEX_JS = """([tex]) => JSON.stringify([...Bokeh.index.all_views()].filter((v) => v.model.type.endsWith("KaTeX")
+  && v.el.isConnected).flatMap((v) => [...v.shadow_el.querySelectorAll("annotation")].map((a) => a.textContent)))
+  === JSON.stringify(tex)"""
+
+
+def test_a_scene_change_typesets_its_equations_in_place(page):
+    """app/static/panel_katex.js: an equation pane whose text changes gets the new text typeset in
+    its container (from the page's cache when typeset before), not a whole new rendering of itself:
+    the equations shown are the scene's, and each pane keeps its style elements."""
+    page.open(query(scene="damped"))
+    page.page.wait_for_selector(TABLE_ROW)
+    assert page.page.evaluate("window.cosymp_panel_katex") is True
+    assert page.page.evaluate(EQUATIONS_JS)["tex"] == list(SCENES["damped"].equations)
+    for name in ("charged", "damped", "charged"):  # the last two typeset from the page's cache
+        page.page.locator("select").first.select_option(label=SCENES[name].title)
+        page.page.wait_for_function(TEX_JS, arg=[list(SCENES[name].equations)])
+        shown = page.page.evaluate(EQUATIONS_JS)
+        assert shown["tex"] == list(SCENES[name].equations), name
+        assert shown["kept"] == shown["seen"] >= len(SCENES["charged"].equations), (name, shown)
+    page.shot("equations-charged")
+    page.check()
+
+
+STYLE_WRITES_JS = """() => {
+  // Writes to <style> elements while every root lays out the page again, nothing having changed.
+  const text = Object.getOwnPropertyDescriptor(Node.prototype, "textContent");
+  let writes = 0;
+  Object.defineProperty(HTMLStyleElement.prototype, "textContent", {configurable: true,
+    get() { return text.get.call(this); }, set(value) { writes += 1; text.set.call(this, value); }});
+  try {
+    for (const view of Bokeh.index.all_views()) {
+      if (view.is_layout_root && view.el.isConnected && typeof view.invalidate_layout === "function") {
+        view.invalidate_layout();
+      }
+    }
+  } finally {
+    delete HTMLStyleElement.prototype.textContent;
+  }
+  return writes;
+}"""
+
+
+def test_a_layout_writes_only_the_style_sheets_whose_text_changed(page):
+    """app/static/bokeh_layouts.js keeps a layout's writes to style sheets and makes only those that
+    change a sheet's text (BokehJS clears each sheet and appends its rules again; the browser counts
+    a sheet written back to the same text as changed, and each change makes the next style
+    recalculation collect the rules of every shadow root). After a scene of another shape, every
+    shown element still holds the size the browser gave it."""
+    page.open(query(scene="damped"))
+    page.page.wait_for_selector(TABLE_ROW)
+    page.page.locator("select").first.select_option(label=SCENES["charged"].title)
+    expect(page.page.locator("h2:visible").first).to_contain_text("Charged particle")
+    page.page.wait_for_timeout(1500)
+    assert page.page.evaluate(STYLE_WRITES_JS) == 0
+    sizes = page.page.evaluate(SIZES_JS)
+    assert len(sizes) > 50 and "Figure" in {s[0] for s in sizes}
+    assert [s for s in sizes if (s[1], s[2]) != (s[3], s[4])] == []
+    page.check()
+
+
+TABS_JS = """() => {
+  // Each Tabs: which tab is shown, and which tabs' contents are in the document.
+  return [...Bokeh.index.all_views()].filter((v) => v.model.type.endsWith("Tabs") && v.el.isConnected)
+    .map((v) => [v.model.active, v.child_views.map((c) => c.el.isConnected)]);
+}"""
+FIGURES_SHOWN_JS = """() => [...Bokeh.index.all_views()].filter((v) => v.model.type === "Figure"
+  && v.el.isConnected && v.el.offsetParent !== null).map((v) => [v.bbox.width, v.bbox.height])"""
+
+
+def test_only_the_shown_tab_s_contents_are_in_the_document(page):
+    """app/static/bokeh_layouts.js takes the contents of the tabs not shown out of the document (a
+    placeholder keeps their place): the browser's style recalculations then collect the rules of the
+    shown tab's shadow roots only. A tab clicked comes back with its figures drawn at their sizes."""
+    page.open()
+    page.page.wait_for_selector(TABLE_ROW)
+    page.page.wait_for_timeout(3000)  # some tabs built ahead
+    for label in ("Structure", "Orbits"):
+        page.page.locator(".bk-tab", has_text=label).first.click()
+        page.page.wait_for_timeout(1500)
+        tabs = page.page.evaluate(TABS_JS)
+        assert tabs and all(shown == [i == active for i in range(len(shown))] for active, shown in tabs), tabs
+        figures = page.page.evaluate(FIGURES_SHOWN_JS)
+        assert len(figures) >= 3 and all(w > 100 and h > 100 for w, h in figures), (label, figures)
+    page.shot("tabs-back-to-orbits")
     page.check()

@@ -224,9 +224,49 @@ def test_the_layouts_shim_still_matches_bokehjs():
     assert re.search(r"_invalidate_layout_if_needed\(\) \{(?:(?!\n        \}\n).)*this\.compute_layout\(\);",
                      js, re.DOTALL)
     assert '"models/plots/plot_canvas":' in js
+    # a style sheet's text is its element's, written whole by _update, and a layout's writes are
+    # update_layout's (it only writes: the reads come after, in compute_layout)
+    assert re.search(r"get css\(\) \{\s*return this\.el\.textContent;\s*\}\s*_update\(css\) \{\s*"
+                     r"this\.el\.textContent = css;\s*\}", js)
+    assert '"core/dom":' in js
     panel_js = (Path(panel.__file__).parent / "dist" / "panel.js").read_text()
-    assert re.search(r"class TabsView extends [^\n]*\{(?:(?!\n    class ).)*\n        update_active\(\) \{",
-                     panel_js, re.DOTALL), "Panel's Tabs changed: revisit the shown-tab layout in bokeh_layouts.js"
+    tabs = re.search(r"class TabsView extends [^\n]*\{((?:(?!\n    class ).)*)", panel_js, re.DOTALL)
+    assert tabs and re.search(r"\n        update_active\(\) \{", tabs[1]), \
+        "Panel's Tabs changed: revisit the shown-tab layout in bokeh_layouts.js"
+    # the tabs not shown are taken out of the document after Panel hides them (_after_layout), and
+    # their own sheet gets Panel's rule from the Tabs' _update_layout
+    assert re.search(r"_after_layout\(\) \{(?:(?!\n        \}\n).)*hide\(child_view\.el\)", tabs[1], re.DOTALL)
+    assert re.search(r"_update_layout\(\) \{(?:(?!\n        \}\n).)*for \(const view of this\.child_views\) "
+                     r"\{(?:(?!\n        \}\n).)*view\.style\.append\(\":host\", \{ grid_area: \"stack\" \}\);",
+                     tabs[1], re.DOTALL), "Panel's Tabs lays out its tabs otherwise: revisit bokeh_layouts.js"
+
+
+def test_the_katex_shim_still_matches_panel():
+    """app/static/panel_katex.js typesets an equation pane's new text in its container, as Panel's
+    KaTeX view does when it renders (the container's HTML set to the text, then KaTeX's
+    auto-render with these delimiters), which Panel does on each change of the text; it hooks
+    BokehJS's register_models, through which Panel registers its models."""
+    import re
+    from pathlib import Path
+
+    import bokeh
+    import panel
+
+    panel_js = (Path(panel.__file__).parent / "dist" / "panel.js").read_text()
+    view = re.search(r"class KaTeXView extends [^\n]*\{((?:(?!\n    class ).)*)", panel_js, re.DOTALL)
+    assert view, "Panel's KaTeX pane changed: revisit app/static/panel_katex.js"
+    assert re.search(r"this\.on_change\(text, \(\) => this\.render\(\)\);", view[1])
+    assert re.search(r"render\(\) \{\s*super\.render\(\);\s*this\.container\.innerHTML = this\.model\.text;\s*"
+                     r"if \(!window\.renderMathInElement\) \{\s*return;\s*\}\s*window\.renderMathInElement\("
+                     r"this\.shadow_el, \{\s*delimiters: \[\s*"
+                     r"\{ left: \"\$\$\", right: \"\$\$\", display: true \},\s*"
+                     r"\{ left: \"\\\\\[\", right: \"\\\\\]\", display: true \},\s*"
+                     r"\{ left: \"\$\", right: \"\$\", display: false \},\s*"
+                     r"\{ left: \"\\\\\(\", right: \"\\\\\)\", display: false \},\s*\],\s*\}\);", view[1]), \
+        "Panel's KaTeX pane renders otherwise: revisit app/static/panel_katex.js"
+    assert re.search(r"\(0, base_1\.register_models\)\(Panel\)", panel_js)
+    js = (Path(bokeh.__file__).parent / "server" / "static" / "js" / "bokeh.js").read_text()
+    assert '"base":' in js and re.search(r"function register_models\(models, force = false\)", js)
 
 
 def test_no_model_of_any_tab_needs_the_bokehjs_bundles_the_page_leaves_out():
