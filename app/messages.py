@@ -8,7 +8,8 @@ three or four: 15-30 ms of the server's time in a change that took 75-100 ms (ti
 app on a 2-core machine: Serializer 2.3-7 ms, Deserializer 1.3-7 ms, the synced set 0.5-0.8 ms).
 
 Here the maps are built by C loops (`zip`, `map`), and a Ref is made for the models a message
-names, when it names them (`Refs`). What a message holds is what Bokeh's own code writes and reads:
+names, when it names them (`Refs`); a message read looks the models it names up in the document's
+own map of its models (`Known`). What a message holds is what Bokeh's own code writes and reads:
 tests/test_app_messages.py compares both on a document of every tab.
 """
 from operator import attrgetter
@@ -41,6 +42,36 @@ class Refs(dict):
         return ref
 
 
+class Known(dict):
+    """Deserializer._references over the document's own map of its models (ID -> model): a model a
+    message names is looked up there when it names it; the models the message creates are kept
+    here, the document's map untouched."""
+
+    def __init__(self, models):
+        super().__init__()
+        self.models = models
+
+    def __contains__(self, key):
+        return dict.__contains__(self, key) or key in self.models
+
+    def get(self, key, default=None):
+        model = dict.get(self, key)
+        return model if model is not None else self.models.get(key, default)
+
+
+def document_map(references):
+    """The map (ID -> model) of the document whose models `references` lists, all of them, as
+    Document.apply_json_patch passes them (`list(doc.models)`); None for any other list."""
+    if not references:
+        return None
+    document = getattr(references[0], "document", None)
+    manager = getattr(document, "models", None)
+    models = getattr(manager, "_models", None)
+    if not isinstance(models, dict) or len(models) != len(references):
+        return None
+    return models
+
+
 def install():
     """Faster reference maps in this process (once; main.py runs for each page)."""
     if ORIGINAL:
@@ -54,8 +85,12 @@ def install():
 
     def deserializer_init(self, references=None, *, setter=None):
         ORIGINAL["deserializer_init"](self, setter=setter)
-        references = references or ()
-        self._references = dict(zip(map(MODEL_ID, references), references))
+        models = document_map(references)
+        if models is not None:
+            self._references = Known(models)
+        else:
+            references = references or ()
+            self._references = dict(zip(map(MODEL_ID, references), references))
 
     def synced_references(self):
         return set(self._models.values()).difference(self._new_models)

@@ -82,3 +82,22 @@ def test_a_patch_is_written_and_read_as_bokeh_does(monkeypatch):
     assert ours == bokeh
     assert len(ours[1]) == len(source.data) and not ours[3], "buffers sent; the new model synced once written"
     assert ("model", "Div", new.id) in ours[2]["events"][1]["new"], "the new model, decoded"
+
+
+def test_a_message_read_looks_up_the_document_s_own_map_and_leaves_it_as_it_was():
+    """Deserializer's references for a document's models are that document's own map (no dict of
+    every model built per message); a model the message creates is the deserializer's, not added to
+    the document's map; any other list is mapped as Bokeh does."""
+    doc = every_tab()
+    known = doc.models._models
+    size = len(known)
+    reader = Deserializer(list(doc.models))
+    assert isinstance(reader._references, messages.Known) and reader._references.models is known
+    some = next(iter(doc.models))
+    assert reader.has_ref(some) and reader._references.get(some.id) is some
+    fresh = Div(text="fresh")
+    content = Serializer(references=set(doc.models)).encode(fresh)
+    decoded = reader.decode(content)
+    assert isinstance(decoded, Div) and decoded.text == "fresh" and decoded.id == fresh.id
+    assert reader._references.get(fresh.id) is decoded and fresh.id not in known and len(known) == size
+    assert type(Deserializer([some])._references) is dict
