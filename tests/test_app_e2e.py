@@ -522,6 +522,12 @@ EQUATIONS_JS = """() => {
   }
   return out;
 }"""
+TYPESETS_JS = """() => {
+  // Each call of KaTeX's auto-render from now on, recorded.
+  const render = window.renderMathInElement;
+  window.cosymp_test_typesets = [];
+  window.renderMathInElement = (...args) => { window.cosymp_test_typesets.push(1); return render(...args); };
+}"""
 TEX_JS = """([tex]) => JSON.stringify([...Bokeh.index.all_views()].filter((v) => v.model.type.endsWith("KaTeX")
   && v.el.isConnected).flatMap((v) => [...v.shadow_el.querySelectorAll("annotation")].map((a) => a.textContent)))
   === JSON.stringify(tex)"""
@@ -535,12 +541,14 @@ def test_a_scene_change_typesets_its_equations_in_place(page):
     page.page.wait_for_selector(TABLE_ROW)
     assert page.page.evaluate("window.cosymp_panel_katex") is True
     assert page.page.evaluate(EQUATIONS_JS)["tex"] == list(SCENES["damped"].equations)
-    for name in ("charged", "damped", "charged"):  # the last two typeset from the page's cache
+    page.page.evaluate(TYPESETS_JS)
+    for name, typeset in (("charged", True), ("damped", False), ("charged", False)):  # the last two: cached
         page.page.locator("select").first.select_option(label=SCENES[name].title)
         page.page.wait_for_function(TEX_JS, arg=[list(SCENES[name].equations)])
         shown = page.page.evaluate(EQUATIONS_JS)
         assert shown["tex"] == list(SCENES[name].equations), name
         assert shown["kept"] == shown["seen"] >= len(SCENES["charged"].equations), (name, shown)
+        assert (page.page.evaluate("() => window.cosymp_test_typesets.splice(0).length") > 0) == typeset, name
     page.shot("equations-charged")
     page.check()
 
@@ -548,19 +556,20 @@ def test_a_scene_change_typesets_its_equations_in_place(page):
 STYLE_WRITES_JS = """() => {
   // Writes to <style> elements while every root lays out the page again, nothing having changed.
   const text = Object.getOwnPropertyDescriptor(Node.prototype, "textContent");
-  let writes = 0;
+  let writes = 0, roots = 0;
   Object.defineProperty(HTMLStyleElement.prototype, "textContent", {configurable: true,
     get() { return text.get.call(this); }, set(value) { writes += 1; text.set.call(this, value); }});
   try {
     for (const view of Bokeh.index.all_views()) {
       if (view.is_layout_root && view.el.isConnected && typeof view.invalidate_layout === "function") {
         view.invalidate_layout();
+        roots += 1;
       }
     }
   } finally {
     delete HTMLStyleElement.prototype.textContent;
   }
-  return writes;
+  return [roots, writes];
 }"""
 
 
@@ -575,7 +584,8 @@ def test_a_layout_writes_only_the_style_sheets_whose_text_changed(page):
     page.page.locator("select").first.select_option(label=SCENES["charged"].title)
     expect(page.page.locator("h2:visible").first).to_contain_text("Charged particle")
     page.page.wait_for_timeout(1500)
-    assert page.page.evaluate(STYLE_WRITES_JS) == 0
+    roots, writes = page.page.evaluate(STYLE_WRITES_JS)
+    assert roots > 0 and writes == 0, (roots, writes)
     sizes = page.page.evaluate(SIZES_JS)
     assert len(sizes) > 50 and "Figure" in {s[0] for s in sizes}
     assert [s for s in sizes if (s[1], s[2]) != (s[3], s[4])] == []
@@ -583,9 +593,10 @@ def test_a_layout_writes_only_the_style_sheets_whose_text_changed(page):
 
 
 TABS_JS = """() => {
-  // Each Tabs: which tab is shown, and which tabs' contents are in the document.
+  // Each Tabs: which tab is shown, which tabs' contents are in the document, and its placeholders.
   return [...Bokeh.index.all_views()].filter((v) => v.model.type.endsWith("Tabs") && v.el.isConnected)
-    .map((v) => [v.model.active, v.child_views.map((c) => c.el.isConnected)]);
+    .map((v) => [v.model.active, v.child_views.map((c) => c.el.isConnected),
+                 [...v.shadow_el.childNodes].filter((n) => n.nodeType === Node.COMMENT_NODE).length]);
 }"""
 FIGURES_SHOWN_JS = """() => [...Bokeh.index.all_views()].filter((v) => v.model.type === "Figure"
   && v.el.isConnected && v.el.offsetParent !== null).map((v) => [v.bbox.width, v.bbox.height])"""
@@ -595,15 +606,18 @@ def test_only_the_shown_tab_s_contents_are_in_the_document(page):
     """app/static/bokeh_layouts.js takes the contents of the tabs not shown out of the document (a
     placeholder keeps their place): the browser's style recalculations then collect the rules of the
     shown tab's shadow roots only. A tab clicked comes back with its figures drawn at their sizes."""
+    from app.features import FEATURES
+
+    labels = [f.label for f in FEATURES]
     page.open()
     page.page.wait_for_selector(TABLE_ROW)
-    page.page.wait_for_timeout(3000)  # some tabs built ahead
     for label in ("Structure", "Orbits"):
         page.page.locator(".bk-tab", has_text=label).first.click()
-        page.page.wait_for_timeout(1500)
+        page.page.wait_for_function(f"() => {{ const f = ({FIGURES_SHOWN_JS})(); "
+                                    "return f.length >= 3 && f.every(([w, h]) => w > 100 && h > 100); }")
         tabs = page.page.evaluate(TABS_JS)
-        assert tabs and all(shown == [i == active for i in range(len(shown))] for active, shown in tabs), tabs
-        figures = page.page.evaluate(FIGURES_SHOWN_JS)
-        assert len(figures) >= 3 and all(w > 100 and h > 100 for w, h in figures), (label, figures)
+        assert tabs and all(shown == [i == active for i in range(len(shown))] and spots == len(shown) - 1
+                            for active, shown, spots in tabs), tabs
+        assert [labels.index(label)] == [active for active, _, _ in tabs], (label, tabs)
     page.shot("tabs-back-to-orbits")
     page.check()

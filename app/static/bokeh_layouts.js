@@ -145,28 +145,42 @@
   // ~800 shadow roots, and each style recalculation after a write to any shadow root's style sheet
   // collects the rules of every shadow root of the document: with the tabs built ahead, a write and
   // a read back took 1.5-2.6 ms against 0.74 without the hidden tabs, and a scene change makes
-  // dozens of them.
+  // dozens of them. (The Tabs is then as tall as its shown tab; Panel's was as tall as its tallest.)
+  const SPOT = "cosymp: a tab not shown";
   const park = (tabs) => {
     const { active } = tabs.model;
+    const spots = new Set();
     tabs.child_views.forEach((view, i) => {
+      const spot = view._cosymp_spot;
+      const placed = view.el.parentNode === tabs.shadow_el;
       if (i === active) {
-        const spot = view._cosymp_spot;
         view._cosymp_spot = undefined;
-        if (view.el.isConnected || spot === undefined) {
+        if (placed || spot === undefined) {
           return;
         }
-        if (spot.isConnected) {
+        if (spot.parentNode === tabs.shadow_el) {
           spot.replaceWith(view.el);
         } else {
           const header = tabs.header_el && tabs.header_el.parentNode === tabs.shadow_el ? tabs.header_el : null;
           tabs.shadow_el.insertBefore(view.el, header);
         }
-      } else if (view.el.parentNode === tabs.shadow_el) {
-        const spot = view._cosymp_spot || document.createComment("");
-        view.el.replaceWith(spot);
-        view._cosymp_spot = spot;
+        return;
+      }
+      if (placed) {
+        const here = spot || document.createComment(SPOT);
+        view.el.replaceWith(here);
+        view._cosymp_spot = here;
+      }
+      if (view._cosymp_spot !== undefined) {
+        spots.add(view._cosymp_spot);
       }
     });
+    // The placeholders of tabs shown again after BokehJS put them back, or removed, go.
+    for (const node of [...tabs.shadow_el.childNodes]) {
+      if (node.nodeType === Node.COMMENT_NODE && node.data === SPOT && !spots.has(node)) {
+        node.remove();
+      }
+    }
   };
   // A component left out of the layout is not painted either, so it is not waited for: BokehJS
   // counts a view finished when all its children are, and a document idle (Panel's onload, its URL

@@ -5,7 +5,8 @@
 // changes three or four equations, and that took 10-20 ms of its main thread, most of it the style
 // sheets. Here a view already rendered whose text changes gets the text's typeset HTML in its
 // container only, from the page's cache when this text was typeset before (the scenes' equations
-// come back with their scene). Any other render (the first, a style change) is Panel's own.
+// come back with their scene). Any other render (the first, a style change) is Panel's own, and
+// what it typeset is kept in the cache too.
 (function () {
   if (typeof Bokeh === "undefined" || typeof Bokeh.require !== "function" || !Bokeh.Models) {
     return;
@@ -18,6 +19,12 @@
   ];
   const typeset = new Map();
   const KEEP = 64;
+  const keep = (text, html) => {
+    if (!typeset.has(text) && typeset.size >= KEEP) {
+      typeset.delete(typeset.keys().next().value);
+    }
+    typeset.set(text, html);
+  };
   let patched = false;
   const patch = () => {
     let model;
@@ -39,6 +46,9 @@
           this.container.parentNode !== this.shadow_el || typeof window.renderMathInElement !== "function") {
         const out = render.call(this);
         this._cosymp_text = text;
+        if (typeof window.renderMathInElement === "function" && this.container != null) {
+          keep(text, this.container.innerHTML);
+        }
         return out;
       }
       const html = typeset.get(text);
@@ -47,10 +57,7 @@
       } else {
         this.container.innerHTML = text;
         window.renderMathInElement(this.container, { delimiters });
-        if (typeset.size >= KEEP) {
-          typeset.delete(typeset.keys().next().value);
-        }
-        typeset.set(text, this.container.innerHTML);
+        keep(text, this.container.innerHTML);
       }
       this._cosymp_text = text;
     };
