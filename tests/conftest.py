@@ -77,9 +77,9 @@ def setup(scene, method, theta=None, **values):
 def server():
     """`panel serve app --setup app/warmup.py` on a free port, logging at info level (the app's
     spare sessions say when they are built and handed out); yields its base URL."""
-    from served import ARTIFACTS, served
+    from served import SERVER_LOG, served
 
-    with served(ARTIFACTS / "server.log", {"PANEL_LOG_LEVEL": "info", "PYTHONUNBUFFERED": "1"}) as (url, _):
+    with served(SERVER_LOG, {"PANEL_LOG_LEVEL": "info", "PYTHONUNBUFFERED": "1"}) as (url, _):
         yield url
 
 

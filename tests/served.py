@@ -21,6 +21,10 @@ CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic"
                  "--disable-background-networking", "--disable-component-update", "--disable-sync"]
 PANEL = str(pathlib.Path(sys.executable).with_name("panel"))  # the command the environment installed
 START_TIMEOUT_S = 600  # a cold numba cache compiles every kernel first (1-3 min quiet, more under load)
+# The session server's log, one per pytest-xdist worker: each worker that runs a browser test serves
+# its own app, and two servers writing one file truncated each other's lines (a test reading the
+# log for the spare sessions found none).
+SERVER_LOG = ARTIFACTS / f"server-{os.environ.get('PYTEST_XDIST_WORKER', 'main')}.log"
 
 
 def free_port():

@@ -12,7 +12,7 @@ from urllib.parse import parse_qs, urlparse
 import numpy as np
 import pytest
 from playwright.sync_api import expect
-from served import ARTIFACTS, CHROMIUM, START_TIMEOUT_S, TABLE_JS, TABLE_ROW, WAIT_MS, query
+from served import ARTIFACTS, CHROMIUM, SERVER_LOG, START_TIMEOUT_S, TABLE_JS, TABLE_ROW, WAIT_MS, query
 
 from app.features.stabilitymap import significant
 from cosymp.scenes import SCENES, first, lead
@@ -65,7 +65,7 @@ def test_a_page_without_settings_gets_a_session_built_before_it_was_asked_for(pa
     gets it, and works as any page (the first view drawn, its URL written, a scene change); a link
     with settings gets a session of its own, built with them. (Twice at first: the server's very
     first page is asked for before the app has adjusted Panel, and asks for no spare.)"""
-    log = ARTIFACTS / "server.log"
+    log = SERVER_LOG
     built = re.compile(r"cosymp: spare session (\S+) built")
     page.open()
     page.open()
