@@ -74,6 +74,7 @@ class Run:
         self.error = None
         self.started = time.perf_counter()
         self.computed_s = None  # how long the computation itself took, in its thread
+        self.threaded = False  # computed in its own thread (`wait`), not in the handler (`Job._now`)
         self.finished = threading.Event()
         self._wake = None
         self._compute = job._compute
@@ -121,6 +122,7 @@ class Run:
         loop = asyncio.get_running_loop()
         woken = asyncio.Event()
         self._wake = lambda: loop.call_soon_threadsafe(woken.set)
+        self.threaded = True
         self.thread.start()
         shown, drawn, told = None, -math.inf, -math.inf
         while True:

@@ -532,6 +532,33 @@ def test_a_comparison_notes_the_time_it_took_in_its_thread_not_the_wait_for_the_
     assert run.computed_s < QUICK_S <= time.perf_counter() - run.started and s.quick()
 
 
+def test_a_comparison_in_its_own_thread_only_lowers_the_cost_noted():
+    """A run in its own thread shares the interpreter with the loop's work meanwhile, which slows
+    it: its cost is noted only where it is lower (or the first). One in the handler is noted as it
+    was, higher or lower. Study's own runs: one in its thread (Run.wait) says so."""
+    import asyncio
+    import types
+
+    rates = {}
+
+    def note(seconds, threaded):
+        study.note_rate(rates, "k", types.SimpleNamespace(computed_s=seconds, threaded=threaded), 100)
+        return rates["k"] * 100
+
+    assert note(0.2, True) == pytest.approx(0.2)
+    assert note(0.5, True) == pytest.approx(0.2), "slowed by the loop: not noted"
+    assert note(0.1, True) == pytest.approx(0.1)
+    assert note(0.3, False) == pytest.approx(0.3), "in the handler: noted as it was"
+    assert note(0.05, False) == pytest.approx(0.05)
+
+    s = Study(scene="damped")
+    run = s._begin()
+    assert not run.threaded
+    asyncio.run(run.wait(lambda *a: None, lambda *a: None))
+    assert run.threaded and run.result is not None
+    run.lease.release()
+
+
 def test_gauge_study_gives_every_gauge_and_invariant_transported_observables():
     s = Study(scene="charged", method="symplectic-euler", view="gauges")
     g = gauges.GaugeStudy(s)

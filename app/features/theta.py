@@ -10,7 +10,15 @@ from cosymp.errors import RunError
 from cosymp.integrate import Setup, check_step
 
 from ..plotting import FLOOR, SLOTS, Curves, Pair, figure, grid, note, pane, vline
-from ..study import SECONDS_PER_STEP, Runs, comparison_bytes, expected_quick, failure_note, run_pair
+from ..study import (
+    SECONDS_PER_STEP,
+    Runs,
+    comparison_bytes,
+    expected_quick,
+    failure_note,
+    note_rate,
+    run_pair,
+)
 from .base import Feature, FeatureView, Follower
 from .cloud import Snapshots, loops
 from .common import color_key
@@ -108,9 +116,9 @@ class ThetaLesson(Follower):
 
     def _done_in(self, inputs, elapsed):
         """A live view keeps no status line; its cost per step is noted (`quick`), as the time the
-        computation took in its thread (see Study._done_in)."""
+        computation took (see Study._done_in and `note_rate`)."""
         scene, _, h, T, _ = inputs
-        LESSON_SECONDS_PER_STEP[scene] = self.run.computed_s / check_step(h, T)
+        note_rate(LESSON_SECONDS_PER_STEP, scene, self.run, check_step(h, T))
 
 
 class ThetaView(FeatureView):
