@@ -135,7 +135,7 @@ def test_the_verdict_calls_a_band_bounded_only_when_the_data_show_it():
     """Near parametric resonance (modulated, eps = 0.5) the solution itself grows, and so does the
     symplectic method's |H + p_t|: the verdict must say how much, not call the band bounded."""
     s = Study(scene="modulated", values={"eps": 0.5})
-    midpoint = np.abs(s.results.entries[0].comparison.run.H_ext[:, 0])
+    midpoint = np.abs(s.results.entries[0].comparison.run.H_ext[1:, 0])  # from the first step, as the verdict
     tenth = len(midpoint) // 10
     growth = midpoint[-tenth:].max() / midpoint[:tenth].max()
     assert growth > common.BAND_GROWTH
@@ -177,6 +177,29 @@ def test_the_verdict_of_a_run_that_stopped_quotes_what_it_reached():
     assert np.isnan(s.results.entries[1].comparison.run.H_ext[-1, 0])
     text = common.verdict(s.results)
     assert "nan" not in text and "round-off" not in text and "rk4's |H + p_t| (at most 0.00087)" in text
+    stop = min(e.comparison.run.t[-1] for e in s.results.entries)
+    assert stop < s.T and all(e.failure for e in s.results.entries)
+    assert f"Up to t = {stop:.6g}, where symplectic-euler and rk4 stopped" in text and "T = 7500" not in text
+    assert "rk4's higher order (4 against 1)" in text
+
+
+def test_the_verdict_says_a_higher_order_only_where_it_is_one():
+    """RK4 below gauss4's band on decaying: the two are of order 4 both, so the smaller error is not
+    put down to RK4's order."""
+    s = Study(scene="decaying", method="gauss4", other="rk4", h=0.1, T=5.0)
+    text = common.verdict(s.results)
+    assert "rk4's |H + p_t|" in text and "stays below gauss4's" in text
+    assert "higher order" not in text and "rk4's error is the smaller, though its order is not higher (4 against 4)" in text
+
+
+def test_the_verdict_of_a_short_run_measures_the_band_from_its_first_step():
+    """Fewer than 20 records: a tenth is one record, and the first, at t = 0, is 0 by construction;
+    the band's growth is its last record over its first step's, not over 0."""
+    s = Study(scene="decaying", method="midpoint", other="rk4", h=0.1, T=1.5)
+    band = np.abs(s.results.entries[0].comparison.run.H_ext[:, 0])
+    assert len(band) < 20 and band[0] == 0.0
+    text = common.verdict(s.results)
+    assert f"itself {band[-1] / band[1]:.2g}× wider in the run's last tenth" in text and "e+" not in text
 
 
 def test_values_and_inputs_follow_each_other():

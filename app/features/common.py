@@ -66,8 +66,15 @@ def verdict(runs):
     kr, lr = ke.comparison.run, le.comparison.run
     kept_err = np.abs(kr.H_ext[:, 0])
     band = float(np.nanmax(kept_err))
-    tenth = max(len(kept_err) // 10, 1)
-    growth = float(np.nanmax(kept_err[-tenth:]) / max(np.nanmax(kept_err[:tenth]), np.finfo(float).tiny))
+    # The tenths from the first step: H + p_t is 0 by construction at t = 0, and a run of fewer than
+    # 20 records had that 0 as its whole first tenth (a band "5.1e+304× wider" at its end).
+    after = kept_err[1:] if len(kept_err) > 1 else kept_err
+    tenth = max(len(after) // 10, 1)
+    growth = float(np.nanmax(after[-tenth:]) / max(np.nanmax(after[:tenth]), np.finfo(float).tiny))
+    stopped = [e.label for e in (ke, le) if e.failure]
+    until = (f"Up to T = {runs.T:g}" if not stopped else
+             f"Up to t = {min(kr.t[-1], lr.t[-1]):.6g}, where {html.escape(' and '.join(stopped))} stopped (see the "
+             "message)")
     rounding = within_roundoff(kr)
     bounded = growth <= BAND_GROWTH or rounding
     what = (f"{html.escape(p)}'s band ({band:.2g}, round-off: within {ROUNDOFF:g} ε |H| √N of its {kr.steps} "
@@ -76,14 +83,20 @@ def verdict(runs):
             f"{html.escape(p)}'s band ({band:.2g}, itself {growth:.2g}× wider in the run's last tenth than in its first)")
     drift = np.abs(lr.H_ext[:, 0])
     if rounding and within_roundoff(lr):
-        return (f"<p class='verdict'>Up to T = {runs.T:g}, both methods' |H + p_t| are round-off (at most {band:.2g} "
+        return (f"<p class='verdict'>{until}, both methods' |H + p_t| are round-off (at most {band:.2g} "
                 f"for {html.escape(p)}, {np.nanmax(drift):.2g} for {html.escape(n)}: within {ROUNDOFF:g} ε |H| √N of N "
                 "steps, the size unbiased rounding reaches): at this h neither method's own error shows. A larger h "
                 "separates them.</p>")
     above = np.flatnonzero(drift > band)
     if not above.size:
-        return (f"<p class='verdict'>Up to T = {runs.T:g}, {html.escape(n)}'s |H + p_t| (at most {np.nanmax(drift):.2g}) "
-                f"stays below {what}: at this h and T the error of {html.escape(n)}'s higher order is the smaller. "
+        orders = [METHODS[e.method].order_at(0.5 if e.comparison.setup.theta is None else e.comparison.setup.theta)
+                  for e in (le, ke)]
+        smaller = (f"the error of {html.escape(n)}'s higher order ({orders[0]} against {orders[1]}) is the smaller"
+                   if orders[0] > orders[1] else
+                   f"{html.escape(n)}'s error is the smaller, though its order is not higher ({orders[0]} against "
+                   f"{orders[1]})")
+        return (f"<p class='verdict'>{until}, {html.escape(n)}'s |H + p_t| (at most {np.nanmax(drift):.2g}) "
+                f"stays below {what}: at this h and T {smaller}. "
                 "Nothing bounds it over longer runs; whether it leaves the band there depends on the scene (the "
                 f"Long run tab measures it).{phase_note(ke, le, bounded)}</p>")
     end = float(np.nanmax(drift[-max(len(drift) // 10, 1):]))  # not its last value: |H + p_t| oscillates
