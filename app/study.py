@@ -61,9 +61,9 @@ def note_rate(rates, key, run, steps):
     """Note in rates[key] what a completed run cost per step (`expected_quick` reads it). A run
     computed in the change's handler had the server's thread to itself: its cost is noted as it
     was. One computed in its own thread shared the interpreter with the loop's work meanwhile (the
-    change's other effects written to the page), which slowed it: modulated's first view, 16 ms
-    alone, took 91 ms there, charged's 50 ms took 234, and neither was computed in the handler
-    again. Such a run only lowers the cost noted (or notes a first one)."""
+    change's other effects written to the page), which slowed it: modulated's first view, at most
+    30 ms alone, took 91 ms there, charged's 50 ms took 234, and neither was computed in the
+    handler again. Such a run only lowers the cost noted (or notes a first one)."""
     rate = run.computed_s / steps
     if not run.threaded or rate < rates.get(key, math.inf):
         rates[key] = rate
