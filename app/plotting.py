@@ -184,6 +184,19 @@ def finite(y):
     return np.where(np.isinf(y), np.nan, y)
 
 
+LINEAR_MAX = 1e300
+"""The largest |value| drawn on a linear axis; a larger one is a gap. The page takes an auto range's
+span as the difference of its ends: the portrait of 'Damped beyond floating point', from -1.4e308 to
+1.5e308 in q, had a span of inf and drew nothing (the same data to 1e300 is an orbit seen blowing up)."""
+
+
+def drawable(y):
+    """y as drawn on a linear axis: infinities, and values beyond LINEAR_MAX, as NaN."""
+    y = finite(y)
+    with np.errstate(invalid="ignore"):
+        return np.where(np.abs(y) > LINEAR_MAX, np.nan, y)
+
+
 DECADES = 1e4  # curves this many times apart in size are drawn as |y| on a log axis
 
 
@@ -240,7 +253,7 @@ class Curves:
 def series(x, y, logy=False, floor=FLOOR):
     """A time series for display: the per-bin envelope of at most POINTS points; on a log axis its
     absolute value, exact zeros at `floor`."""
-    x, y = envelope(x, finite(np.abs(y) if logy else y), POINTS)
+    x, y = envelope(x, finite(np.abs(y)) if logy else drawable(y), POINTS)
     return x, (np.where(y == 0, floor, y) if logy else y)
 
 
@@ -259,7 +272,7 @@ def peaks(x, y):
 
 def path(x, y):
     """A parametric curve (an orbit) thinned to PATH_POINTS points in order."""
-    return thin(finite(x), finite(y), PATH_POINTS)
+    return thin(drawable(x), drawable(y), PATH_POINTS)
 
 
 class Raster:
@@ -278,6 +291,7 @@ class Raster:
         self.colors_ = pair_colors(*labels)
 
     def set(self, data):
+        data = {slot: (drawable(x), drawable(y)) for slot, (x, y) in data.items()}
         pts = [xy for xy in data.values() if len(xy[0])]
         if not pts:
             for s in self.sources.values():

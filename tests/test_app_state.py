@@ -183,6 +183,19 @@ def test_the_verdict_of_a_run_that_stopped_quotes_what_it_reached():
     assert "rk4's higher order (4 against 1)" in text
 
 
+def test_an_orbit_that_overflows_is_drawn_up_to_a_range_the_page_can_span():
+    """'Damped beyond floating point': q passes 1e308 in both runs. The page takes an auto range's
+    span as the difference of its ends, so an orbit from -1.4e308 to 1.5e308 drew an empty portrait;
+    drawn up to LINEAR_MAX, its span (padded by a tenth) is finite, and most of the orbit is there."""
+    s = Study(scene="damped", method="symplectic-euler", other="rk4", h=0.1, T=7500.0, values={"gamma": 0.2})
+    q = s.results.entries[0].comparison.run.q[:, 0, 0]
+    assert np.nanmax(np.abs(q)) > 1e307
+    x = np.concatenate([src.data["x"] for src in shown_figures(drawn(orbits.OrbitsView(s))).portraits[0][2].sources.values()])
+    shown = x[np.isfinite(x)]
+    assert np.abs(shown).max() <= plotting.LINEAR_MAX < np.abs(shown).max() * 1e10
+    assert np.isfinite(1.1 * (shown.max() - shown.min())) and shown.size > 0.9 * x.size
+
+
 def test_the_verdict_says_a_higher_order_only_where_it_is_one():
     """RK4 below gauss4's band on decaying: the two are of order 4 both, so the smaller error is not
     put down to RK4's order."""
