@@ -196,6 +196,17 @@ def test_an_orbit_that_overflows_is_drawn_up_to_a_range_the_page_can_span():
     assert np.isfinite(1.1 * (shown.max() - shown.min())) and shown.size > 0.9 * x.size
 
 
+def test_the_verdict_says_where_the_symplectic_methods_run_stopped():
+    """'Kapitza: Newton fails': midpoint's Newton iteration fails at t = 11, RK4 runs to T = 100; the
+    band RK4 leaves is measured over midpoint's 11 time units, and the verdict says so."""
+    s = Study(scene="kapitza", method="midpoint", other="rk4", h=0.5, T=100.0, values={"q0": 3.0, "a": 0.3, "nu": 40.0})
+    midpoint, rk4 = s.results.entries
+    assert midpoint.failure and not rk4.failure and midpoint.comparison.run.t[-1] == pytest.approx(11.0)
+    text = common.verdict(s.results)
+    assert "rk4's |H + p_t| leaves midpoint's" in text
+    assert "midpoint's run stopped at t = 11 (see the message): its band is measured up to there." in text
+
+
 def test_the_verdict_says_a_higher_order_only_where_it_is_one():
     """RK4 below gauss4's band on decaying: the two are of order 4 both, so the smaller error is not
     put down to RK4's order."""

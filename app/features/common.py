@@ -103,7 +103,9 @@ def verdict(runs):
     return (f"<p class='verdict'>{html.escape(n)}'s |H + p_t| leaves {what} at t ≈ {lr.t[above[0]]:.3g} and ends "
             f"{end / band:.3g}× above it (its maximum over the run's last tenth, to t = {lr.t[-1]:g}): "
             + (f"{html.escape(n)}'s is the method's error, {html.escape(p)}'s its steps' rounding." if rounding else f"{html.escape(n)} drifts, {html.escape(p)} does not." if bounded else
-               f"{html.escape(n)} drifts faster than {html.escape(p)}.") + f"{phase_note(ke, le, bounded)}</p>")
+               f"{html.escape(n)} drifts faster than {html.escape(p)}.")
+            + (f" {html.escape(p)}'s run stopped at t = {kr.t[-1]:.6g} (see the message): its band is measured up to "
+               "there." if ke.failure else "") + f"{phase_note(ke, le, bounded)}</p>")
 
 
 def within_roundoff(run):
