@@ -4,6 +4,7 @@ Every page load records every request URL (none may leave 127.0.0.1) and every c
 (there must be none), and saves a screenshot to tests/artifacts/.
 """
 import json
+import math
 import re
 import shutil
 import time
@@ -176,6 +177,14 @@ def test_a_preset_link_opens_its_figure(page):
     page.page.locator("details.presets summary").click()
     expect(page.page.get_by_text("each run stops there with a message")).to_be_visible()
     expect(page.page.locator(".notyf__message").first).to_contain_text("left floating-point range")
+    # Both runs' q pass 1e308: the portrait is drawn (its auto ranges were (-inf, inf), an empty plot),
+    # and the numbers table keeps both methods' columns in view (the failure message wraps).
+    ranges = page.page.evaluate("""() => [...Bokeh.index.all_views()].filter((v) => v.model.type === 'Figure'
+        && v.el.isConnected && v.el.getBoundingClientRect().width > 0).map((v) => [v.model.x_range.start,
+        v.model.x_range.end, v.model.y_range.start, v.model.y_range.end])""")
+    assert len(ranges) == 3 and all(math.isfinite(x) for r in ranges for x in r), ranges
+    table = page.page.locator("table.dataframe").first
+    assert table.evaluate("(t) => t.getBoundingClientRect().right <= window.innerWidth"), "a column out of view"
     page.shot("05b-hard-case-overflow")
     page.check()
 
