@@ -188,13 +188,19 @@ LINEAR_MAX = 1e300
 """The largest |value| drawn on a linear axis; a larger one is a gap. The page takes an auto range's
 span as the difference of its ends: the portrait of 'Damped beyond floating point', from -1.4e308 to
 1.5e308 in q, had a span of inf and drew nothing (the same data to 1e300 is an orbit seen blowing up)."""
+LOG_RANGE = (1e-250, 1e250)
+"""The |values| drawn on a log axis; others are gaps. The page pads a log axis' auto range by a share
+of its decades: RK4's |H + p_t| past its stability limit, from 1e-32 to 1e308, ended at 1e325 = inf."""
 
 
-def drawable(y):
-    """y as drawn on a linear axis: infinities, and values beyond LINEAR_MAX, as NaN."""
+def drawable(y, log=False):
+    """y as drawn on a linear axis (log: on a log axis): infinities, and values out of LINEAR_MAX
+    (LOG_RANGE), as NaN. Exact zeros stay (a log axis' series draws them at a floor)."""
     y = finite(y)
+    a = np.abs(y)
     with np.errstate(invalid="ignore"):
-        return np.where(np.abs(y) > LINEAR_MAX, np.nan, y)
+        out = (a > LOG_RANGE[1]) | ((a > 0) & (a < LOG_RANGE[0])) if log else a > LINEAR_MAX
+        return np.where(out, np.nan, y)
 
 
 DECADES = 1e4  # curves this many times apart in size are drawn as |y| on a log axis
@@ -253,14 +259,14 @@ class Curves:
 def series(x, y, logy=False, floor=FLOOR):
     """A time series for display: the per-bin envelope of at most POINTS points; on a log axis its
     absolute value, exact zeros at `floor`."""
-    x, y = envelope(x, finite(np.abs(y)) if logy else drawable(y), POINTS)
-    return x, (np.where(y == 0, floor, y) if logy else y)
+    x, y = envelope(x, drawable(np.abs(y) if logy else y, log=logy), POINTS)
+    return x, (drawable(np.where(y == 0, floor, y), log=True) if logy else y)
 
 
 def peaks(x, y):
     """The maximum of each of at most POINTS bins of a deviation, at FLOOR where it is exactly zero:
     a bound drawn as a clean band, not the noise of round-off."""
-    y = np.maximum(finite(y), FLOOR)
+    y = drawable(np.maximum(finite(y), FLOOR), log=True)
     if len(y) <= POINTS:
         return np.asarray(x, float), y
     width = math.ceil(len(y) / POINTS)

@@ -196,6 +196,25 @@ def test_an_orbit_that_overflows_is_drawn_up_to_a_range_the_page_can_span():
     assert np.isfinite(1.1 * (shown.max() - shown.min())) and shown.size > 0.9 * x.size
 
 
+def test_what_is_drawn_fits_an_axis_the_page_can_span():
+    """Linear axes draw |values| up to LINEAR_MAX, log axes those in LOG_RANGE (exact zeros at the
+    floor), the rest as gaps: the page pads a log range by a share of its decades, so a series from
+    1e-32 to 1e308 ended at 1e325 = inf (RK4 past its stability limit: an empty Long run plot)."""
+    y = np.array([0.0, 1e-300, 1e-32, 1.0, 1e249, 1e260, 1e308, np.inf])
+    assert np.isnan(plotting.drawable(y)).tolist() == [False] * 6 + [True, True]
+    assert np.isnan(plotting.drawable(y, log=True)).tolist() == [False, True, False, False, False, True, True, True]
+    x = np.arange(y.size, dtype=float)
+    lo, hi = plotting.LOG_RANGE
+    for _, ys in (plotting.series(x, y, logy=True), plotting.peaks(x, y)):
+        shown = ys[np.isfinite(ys)]
+        decades = np.log10(shown.max()) - np.log10(shown.min())
+        assert lo <= shown.min() and shown.max() <= hi and shown.size >= 3
+        assert np.isfinite(10.0 ** (np.log10(shown.max()) + 0.05 * decades)) and 10.0 ** (np.log10(shown.min()) - 0.05 * decades) > 0
+    _, ys = plotting.series(x, y)
+    shown = ys[np.isfinite(ys)]
+    assert np.abs(shown).max() <= plotting.LINEAR_MAX and np.isfinite(1.1 * (shown.max() - shown.min()))
+
+
 def test_the_verdict_says_where_the_symplectic_methods_run_stopped():
     """'Kapitza: Newton fails': midpoint's Newton iteration fails at t = 11, RK4 runs to T = 100; the
     band RK4 leaves is measured over midpoint's 11 time units, and the verdict says so."""

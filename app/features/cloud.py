@@ -5,7 +5,7 @@ import panel as pn
 
 from cosymp.report.style import pair_colors
 
-from ..plotting import SLOTS, figure, grid, note, pane, path, source
+from ..plotting import SLOTS, drawable, figure, grid, note, pane, path, source
 from .base import Feature, FeatureView
 from .common import color_key, comparisons, names
 from .structure import time_plots, update_plots
@@ -16,7 +16,8 @@ CLOUD_TEXT = ("<h4>Phase-space cloud</h4><p class='doc'>A loop of initial states
 
 
 def closed(q, p):
-    return np.append(q, q[0]), np.append(p, p[0])
+    """A loop's points, closed, as drawn (`drawable`)."""
+    return drawable(np.append(q, q[0])), drawable(np.append(p, p[0]))
 
 
 class Snapshots:

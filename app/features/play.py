@@ -7,7 +7,7 @@ import numpy as np
 import panel as pn
 import param
 
-from ..plotting import Pair, figure, grid, note, pane, path, push, reset_ranges, vline
+from ..plotting import Pair, drawable, figure, grid, note, pane, path, push, reset_ranges, vline
 from .base import Feature, FeatureView
 from .cloud import closed
 from .common import color_key, comparisons, names, phase_axes, zcols
@@ -91,7 +91,7 @@ class PlayView(FeatureView):
             self.orbit_fig.xaxis.axis_label, self.orbit_fig.yaxis.axis_label = xl, yl
             self._scene = runs.scene
         i, j = phase_axes(runs.scene)[0][:2]
-        self.orbits = {slot: zcols(c.run, i, j) for slot, c in comparisons(runs).items()}
+        self.orbits = {slot: tuple(map(drawable, zcols(c.run, i, j))) for slot, c in comparisons(runs).items()}
         for p in (self.trace, self.now, self.loop):
             p.colors(names(runs))
         self.faint.set({slot: path(*xy) for slot, xy in self.orbits.items()})
