@@ -89,8 +89,7 @@ def verdict(runs):
                 "separates them.</p>")
     above = np.flatnonzero(drift > band)
     if not above.size:
-        orders = [METHODS[e.method].order_at(0.5 if e.comparison.setup.theta is None else e.comparison.setup.theta)
-                  for e in (le, ke)]
+        orders = [order(e) for e in (le, ke)]
         smaller = (f"the error of {html.escape(n)}'s higher order ({orders[0]} against {orders[1]}) is the smaller"
                    if orders[0] > orders[1] else
                    f"{html.escape(n)}'s error is the smaller, though its order is not higher ({orders[0]} against "
@@ -106,6 +105,12 @@ def verdict(runs):
                f"{html.escape(n)} drifts faster than {html.escape(p)}.")
             + (f" {html.escape(p)}'s run stopped at t = {kr.t[-1]:.6g} (see the message): its band is measured up to "
                "there." if ke.failure else "") + f"{phase_note(ke, le, bounded)}</p>")
+
+
+def order(entry):
+    """The order of a computed entry's method at its θ (1/2 where it takes none)."""
+    theta = entry.comparison.setup.theta
+    return METHODS[entry.method].order_at(0.5 if theta is None else theta)
 
 
 def within_roundoff(run):
@@ -126,8 +131,7 @@ def phase_note(kept, lost, bounded):
     a, b = (float(np.nanmax(e.comparison.error)) for e in (kept, lost))
     if not a > b:
         return ""
-    orders = [METHODS[e.method].order_at(0.5 if e.comparison.setup.theta is None else e.comparison.setup.theta)
-              for e in (kept, lost)]
+    orders = [order(e) for e in (kept, lost)]
     p = html.escape(kept.label)
     return (f" {p}'s trajectory error is the larger, though (up to {a:.2g} against {b:.2g} over the run): of order "
             f"{orders[0]} against {orders[1]}, {p} "
