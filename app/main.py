@@ -38,6 +38,7 @@ if (sent % 2 === 1)
 """
 AHEAD_IDLE_S = 1.0  # after the last change in any page of the server
 GONE_MS = 1000  # a page whose browser has gone this long stops (App._watch)
+URL_MS = 250  # the URL follows a change of the shown state this long after (App._write_url)
 DISCARDING = set()  # the tasks discarding closed pages' sessions (App._discard)
 COPY_LINK_JS = """
 const label = 'Copy link to this view';
@@ -65,6 +66,8 @@ class App(param.Parameterized):
         self._pending = []
         self._stopped = False
         self._doc = pn.state.curdoc
+        self._location = pn.state.location
+        self._url_due = False
         # The raw query text (Panel's query_params turns numbers and JSON into values already).
         query = dict(parse_qsl(pn.state.location.search.lstrip("?"))) if pn.state.location is not None else {}
         known = set(URL_NAMES.values()) | {u for f in FEATURES for u in f.url.values()}
@@ -165,13 +168,25 @@ class App(param.Parameterized):
 
     def _write_url(self):
         """The URL holds the state of the shown results (only ever a valid one), so a copied link
-        reopens them."""
-        if pn.state.location is None or self.study.results is None:
+        reopens them. It is written URL_MS after a change, once for the changes made meanwhile: in
+        the message that brought the results, the page's history.pushState made the browser
+        recompute its styles in the middle of drawing them (7-20 ms of a scene change's, traced)."""
+        if self._url_due:
+            return
+        if not self._served():
+            self._url_now()
+            return
+        self._url_due = True
+        self._doc.add_timeout_callback(self._url_now, URL_MS)
+
+    def _url_now(self):
+        self._url_due = False
+        if self._location is None or self.study.results is None or self._stopped:
             return
         items = query_items(self.study.state(), URL_NAMES)
         for f in FEATURES:
             items.update(query_items({k: getattr(self.states[f.name], k) for k in f.url}, f.url))
-        pn.state.location.search = "?" + urlencode(items)
+        self._location.search = "?" + urlencode(items)
 
     def _flush(self):
         """On load (the browser has drawn the page): write the state into the URL and post the

@@ -76,6 +76,7 @@ def _wait_until_serving(proc, port, log_path):
 
 
 WAIT_MS = 20_000
+URL_QUIET_MS = 1000  # the app writes a change into the URL 250 ms after it (app.main.URL_MS)
 
 
 
@@ -96,6 +97,12 @@ class Page:
         self.page.goto(self.base + query, wait_until="load")
         self.page.wait_for_selector(".bk-tab.bk-active")
         self.page.wait_for_selector("h2")
+
+    def settled_url(self):
+        """The page's URL once the app has written what it would into it: for a check that a
+        refused value never reaches it."""
+        self.page.wait_for_timeout(URL_QUIET_MS)
+        return self.page.url
 
     def shot(self, name):
         self.page.screenshot(path=str(ARTIFACTS / f"{name}.png"))

@@ -104,7 +104,7 @@ def test_switching_scenes_rebuilds_controls_and_plots(page):
     opened = first(SCENES["charged"])  # the menu opens the scene's first view
     page.page.wait_for_function(f"() => JSON.stringify(({TABLE_JS})()).includes('{round(opened.T / opened.h):,}')")
     assert page.page.get_by_text("beta(t): 'paper', 'constant' or an expression of t").count() == 1
-    assert "scene=charged" in page.page.url
+    page.page.wait_for_url(lambda url: "scene=charged" in url)
     page.page.wait_for_timeout(1000)
     page.shot("03-charged-compare")
     page.check()
