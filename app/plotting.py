@@ -196,7 +196,7 @@ of its decades: RK4's |H + p_t| past its stability limit, from 1e-32 to 1e308, e
 def drawable(y, log=False):
     """y as drawn on a linear axis (log: on a log axis): infinities, and values out of LINEAR_MAX
     (LOG_RANGE), as NaN. Exact zeros stay (a log axis' series draws them at a floor)."""
-    y = finite(y)
+    y = np.asarray(y, dtype=float)
     a = np.abs(y)
     with np.errstate(invalid="ignore"):
         out = (a > LOG_RANGE[1]) | ((a > 0) & (a < LOG_RANGE[0])) if log else a > LINEAR_MAX
