@@ -22,7 +22,7 @@ from panel.reactive import Syncable
 from panel.theme import Bootstrap
 from tornado.websocket import WebSocketClosedError, WebSocketHandler
 
-from . import messages, properties
+from . import graph, messages, properties
 
 REBOOT = "app/static/bootstrap_reboot.css"  # Bootstrap's Reboot section, verbatim (see Design)
 # BokehJS and Panel's views adjusted in the page (served from app/static by the server; see each file).
@@ -284,10 +284,12 @@ def adjust_panel():
     queued message waits for the next change to be sent, a page that closes while being
     written to leaves no traceback in the log, a page without settings gets a spare session, a
     page's stylesheet addresses are patched from its document's models, Bokeh's properties
-    compute their per-class constants once (app/properties.py) and its messages map the document's
-    models without a Python loop over them (app/messages.py)."""
+    compute their per-class constants once (app/properties.py), its messages map the document's
+    models without a Python loop over them (app/messages.py) and a document's map of its models follows
+    what changed without a walk of the page (app/graph.py)."""
     properties.install()
     messages.install()
+    graph.install()
     Resources._default_components = BOKEH_BUNDLES
     Syncable._debounce = 0
     if not getattr(Syncable._change_event, "cosymp", False):

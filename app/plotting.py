@@ -364,32 +364,8 @@ def push(update):
     if context is not None and context.session is not None and not pn.state.loaded:
         pn.state.onload(update)
         return
-    with unlocked(), (deferred_graph(doc) if doc is not None else contextlib.nullcontext()):
+    with unlocked(), (doc.models.freeze() if doc is not None else contextlib.nullcontext()):
         update()
-
-
-@contextlib.contextmanager
-def deferred_graph(doc):
-    """Like Bokeh's `doc.models.freeze()`, one recomputation of the document's model graph at the
-    end for every change of a model reference made inside, but none when no reference changed: a
-    data update changes none, and freeze() walked every model of the page (25-35 ms) after each.
-    Bokeh asks for a recomputation through `models.invalidate()`; inside, that only takes note. A
-    freeze is held meanwhile, so that Panel's (`freeze_doc`, around a layout's new children) does not
-    recompute at its end as well: a tab built ahead walked the page's graph twice."""
-    models = doc.models
-    if models._freeze_count or "invalidate" in vars(models):  # an outer freeze recomputes for us
-        yield
-        return
-    asked = []
-    models.invalidate = lambda: asked.append(True)
-    models._push_freeze()  # Panel's own freezes inside (a layout's new children) recompute at our end, not theirs
-    try:
-        yield
-    finally:
-        models._freeze_count -= 1  # without _pop_freeze's recomputation
-        del models.invalidate
-        if asked:
-            models.recompute()
 
 
 def pane(fig, **kw):

@@ -155,39 +155,6 @@ def test_the_design_is_computed_once_per_component_class_and_handed_out_as_copie
     assert len([k for k in page.Design._modifiers if k[0] is pn.widgets.Button]) == 1
 
 
-def test_a_data_update_does_not_walk_the_model_graph_and_a_new_model_is_attached_once():
-    """plotting.deferred_graph: Bokeh's freeze() walks every model of the page when it ends; a data
-    update changes no reference and needs no walk, a new range does and gets one, at the end."""
-    from bokeh.document import Document
-    from bokeh.models import Range1d
-
-    from app import plotting
-
-    doc = Document()
-    fig = plotting.figure("t")
-    src = plotting.source()
-    fig.line("x", "y", source=src)
-    doc.add_root(fig)
-    walks = []
-    recompute = doc.models.recompute
-    doc.models.recompute = lambda: (walks.append(1), recompute())
-    with plotting.deferred_graph(doc):
-        src.data = {"x": [1.0, 2.0], "y": [3.0, 4.0]}
-    assert walks == []
-    new = Range1d(0, 1)
-    with plotting.deferred_graph(doc):
-        fig.x_range = new
-        fig.y_range = Range1d(0, 2)
-        assert doc.models.get_by_id(new.id) is None, "deferred until the end"
-    assert walks == [1] and doc.models.get_by_id(new.id) is new and "invalidate" not in vars(doc.models)
-    column = pn.Column(pn.pane.Markdown("a"))
-    doc.add_root(column.get_root(doc))
-    walks.clear()
-    with plotting.deferred_graph(doc):
-        column.append(pn.pane.Bokeh(plotting.figure("new")))  # Panel's freeze_doc ends inside
-    assert walks == [1] and doc.models._freeze_count == 0, "one walk, at the end, for a layout's new children"
-
-
 def test_the_layouts_shim_still_matches_bokehjs():
     """app/static/bokeh_layouts.js defers a root's layout while a message is applied. It relies on
     LayoutDOMView.invalidate_layout handing the request up to the root, which lays out the page at
