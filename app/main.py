@@ -19,7 +19,7 @@ from cosymp.errors import InputError, RunError
 from .features import FEATURES
 from .jobs import Job, Note
 from .memory import Collector, log_when_freed, map_large_blocks
-from .page import SCRIPTS, Activity, Design, Spares, adjust_panel, serve_locally
+from .page import LOG, SCRIPTS, SPARE_LAYOUTS, Activity, Design, Spares, adjust_panel, serve_locally
 from .plotting import katex_fonts_css, push, rule
 from .presets import URL_NAMES, parse_items, query_items
 from .study import Controls, PresetLinks, SceneInfo, Study, study_report
@@ -111,6 +111,9 @@ class App(param.Parameterized):
         self.study.param.watch(Activity.touch, [*Study.INPUTS, "view"])
         pn.state.onload(self._flush)
         pn.state.on_session_destroyed(self._stop)
+        self._loaded = False
+        if Spares.building_one():
+            self._doc.add_timeout_callback(self._layouts_ahead, AHEAD_MS)
 
     def _study(self, query):
         """The study the link asks for; what cannot be applied is said, and the defaults stand in."""
@@ -196,6 +199,7 @@ class App(param.Parameterized):
         first plot over four page loads in a row, against 1.4 s for the first). The server's full
         garbage collections move to its idle time (memory.Collector)."""
         Activity.touch()
+        self._loaded = True
         self._write_url()
         for note in self._pending:
             self._notify(note.level, note.text)
@@ -266,6 +270,22 @@ class App(param.Parameterized):
             return
         self._next_ahead()
 
+    def _layouts_ahead(self):
+        """A spare session (page.Spares) builds its tabs' layouts while it waits for its page, one
+        at a time in the server's idle time. A layout touches no document, so the page's first
+        document stays as small, and its page's building ahead (`_ahead`, from its load on) only has
+        its tabs join: their layouts took the server 40-130 ms each there, and a tab's first visit
+        in the page's first seconds waited for the one under way, or built its own."""
+        if self._stopped or self._loaded:
+            return
+        if Activity.idle(AHEAD_IDLE_S):
+            view = next((self.views[f.name] for f in FEATURES if f.ahead and not self.views[f.name].built), None)
+            if view is None:
+                LOG.info(SPARE_LAYOUTS, self._doc.session_context.id)
+                return
+            view.__panel__()
+        self._doc.add_timeout_callback(self._layouts_ahead, AHEAD_MS)
+
     def _paced(self, event):
         """The page has drawn the last step built ahead and is idle: the next one AHEAD_MS later, a gap in
         which a change made on the page goes out at once (`_ahead`; with no gap the first scene change
@@ -285,7 +305,8 @@ class App(param.Parameterized):
                 continue
             view, box = self.views[f.name], self.tabs[i]
             self._ahead_done.add(f.name)
-            yield view.__panel__
+            if not view.built:  # a spare's may be (`_layouts_ahead`)
+                yield view.__panel__
             yield lambda box=box, view=view: len(box) or box.append(view)
             yield from view.ahead()
 

@@ -177,6 +177,7 @@ class Activity:
 LOG = logging.getLogger("panel.cosymp")
 SPARE_BUILT = "cosymp: spare session %s built in %.2f s"
 SPARE_HANDED = "cosymp: a page got spare session %s"
+SPARE_LAYOUTS = "cosymp: spare session %s has built its tabs' layouts"
 
 
 class Spares:
@@ -193,7 +194,8 @@ class Spares:
     IDLE_S: a build takes the server 0.35-0.6 s, which a change made meanwhile waits for. A spare is
     kept from the server's check for unused sessions until it is handed out, and then until its page
     has loaded (`loaded`) or HANDED_S have passed (its browser connects within a second or two; one
-    that never does is then discarded as any page's session)."""
+    that never does is then discarded as any page's session). While it waits, a spare builds its
+    tabs' layouts in the server's idle time (main.App._layouts_ahead)."""
 
     IDLE_S = 2.0
     HANDED_S = 60.0
@@ -202,6 +204,7 @@ class Spares:
     building: ClassVar[set] = set()
     handed: ClassVar[dict] = {}  # id of a spare handed out -> the timer that lets it expire (unless its page loads first)
     _asking = contextvars.ContextVar("cosymp_spare_asking", default=None)
+    _building = contextvars.ContextVar("cosymp_spare_building", default=False)
 
     @classmethod
     def serve(cls, get):
@@ -238,6 +241,11 @@ class Spares:
         return spare
 
     @classmethod
+    def building_one(cls):
+        """Whether the session being built now is a spare (then its page may be a while coming)."""
+        return cls._building.get()
+
+    @classmethod
     def loaded(cls, session):
         """A page has loaded in this session: if it was a spare, it no longer needs keeping."""
         timer = cls.handed.get(getattr(session, "id", None))
@@ -268,7 +276,11 @@ class Spares:
             token = generate_jwt_token(spare, secret_key=app.secret_key, signed=app.sign_sessions,
                                        expiration=app.session_token_expiration,
                                        extra_payload={"headers": {}, "cookies": {}, "arguments": {}})
-            session = await context.create_session_if_needed(spare, request, token)
+            building = cls._building.set(True)
+            try:
+                session = await context.create_session_if_needed(spare, request, token)
+            finally:
+                cls._building.reset(building)
             session.block_expiration()
             cls.ready[key] = spare
             LOG.info(SPARE_BUILT, spare, time.monotonic() - start)

@@ -63,9 +63,10 @@ def test_opens_on_the_first_view_and_a_slider_updates_the_plots(page):
 def test_a_page_without_settings_gets_a_session_built_before_it_was_asked_for(page):
     """app/page.Spares: once a page without settings has loaded and the server has been idle, a
     session of the first view is built (the server's log says so); the next page without settings
-    gets it, and works as any page (the first view drawn, its URL written, a scene change); a link
-    with settings gets a session of its own, built with them. (Twice at first: the server's very
-    first page is asked for before the app has adjusted Panel, and asks for no spare.)"""
+    gets it, and works as any page (the first view drawn, its URL written, a scene change, a tab
+    whose layout the spare built while it waited); a link with settings gets a session of its own,
+    built with them. (Twice at first: the server's very first page is asked for before the app has
+    adjusted Panel, and asks for no spare.)"""
     log = SERVER_LOG
     built = re.compile(r"cosymp: spare session (\S+) built")
     page.open()
@@ -75,9 +76,9 @@ def test_a_page_without_settings_gets_a_session_built_before_it_was_asked_for(pa
         spares = built.findall(log.read_text())
         handed = set(re.findall(r"cosymp: a page got spare session (\S+)", log.read_text()))
         waiting = [s for s in spares if s not in handed]
-        if waiting:
+        if waiting and f"cosymp: spare session {waiting[-1]} has built its tabs' layouts" in log.read_text():
             break
-        assert time.monotonic() < deadline, "no spare session was built within 60 s of a page's load"
+        assert time.monotonic() < deadline, "no spare session was built, with its tabs' layouts, within 60 s"
         page.page.wait_for_timeout(250)
     page.open()
     assert f"cosymp: a page got spare session {waiting[-1]}" in log.read_text()
@@ -88,6 +89,8 @@ def test_a_page_without_settings_gets_a_session_built_before_it_was_asked_for(pa
     page.page.locator("select").first.select_option(label=SCENES["damped"].title)
     page.wait_for_numbers_change(before)
     expect(page.page.locator("h2:visible").first).to_contain_text("Damped oscillator")
+    page.page.locator(".bk-tab", has_text="Theta lesson").click()
+    page.page.get_by_text("theta-naive").first.wait_for()
     page.check()
     count = log.read_text().count("cosymp: a page got spare session")
     page.open(query(scene="charged"))

@@ -508,6 +508,53 @@ def test_tabs_are_built_ahead_one_at_a_time_while_the_page_is_idle_and_start_no_
     app._stop(None)
 
 
+def test_a_spare_builds_its_tabs_layouts_while_it_waits_and_its_page_only_has_them_join(monkeypatch, caplog):
+    """A session built as a spare (page.Spares) builds the layout of each tab built ahead, one per step,
+    while the server is idle (App._layouts_ahead): nothing joins its document, so the page's first
+    document stays as small. Its page's building ahead then has no layout step left, and its load
+    stops the spare's steps."""
+    from bokeh.document import Document
+    from panel.io.state import set_curdoc
+
+    doc = Document()
+    scheduled = []
+    monkeypatch.setattr(doc, "add_timeout_callback", lambda callback, ms: scheduled.append(callback))
+    building = page.Spares._building.set(True)
+    try:
+        with set_curdoc(doc):
+            app = main.App()
+    finally:
+        page.Spares._building.reset(building)
+    assert scheduled == [app._layouts_ahead]
+    doc._session_context = lambda: types.SimpleNamespace(id="spare-id")  # for the log line
+    ahead = [f.name for f in FEATURES if f.ahead]
+    page.Activity.touch()
+    app._layouts_ahead()
+    assert [n for n in ahead if app.views[n].built] == ["compare"], "not idle: nothing built"
+    page.Activity.last -= main.AHEAD_IDLE_S
+    with caplog.at_level("INFO", logger=page.LOG.name):
+        for k in range(len(ahead) - 1):
+            app._layouts_ahead()
+            assert sum(app.views[n].built for n in ahead) == k + 2, "one layout a step"
+        assert len(scheduled) == len(ahead) + 1 and not caplog.records
+        app._layouts_ahead()
+        assert page.SPARE_LAYOUTS % "spare-id" in caplog.text and len(scheduled) == len(ahead) + 1
+    assert doc.roots == [] and len(doc.models) == 0, "the spare's document is not touched"
+    steps = [step.__qualname__ for step in app._ahead_work() if hasattr(step, "__qualname__")]
+    assert not any(q.endswith("__panel__") for q in steps), "the page only has them join"
+    plain = main.App()
+    assert sum(s.__qualname__.endswith("__panel__") for s in plain._ahead_work() if hasattr(s, "__qualname__")) \
+        == len(ahead) - 1, "a page's own session builds every layout ahead but the one it shows"
+    scheduled.clear()
+    spare = main.App()
+    spare._doc = doc
+    spare._loaded = True
+    spare._layouts_ahead()
+    assert scheduled == [] and not spare.views["structure"].built, "a page that has loaded builds its own"
+    for a in (app, plain, spare):
+        a._stop(None)
+
+
 def test_building_a_pages_session_is_no_change_its_load_is(monkeypatch):
     """A session built ahead of its page (a spare, app/page.Spares) counted as a page's change: every
     page's building ahead then waited AHEAD_IDLE_S more, and a tab clicked 3 s after its page was

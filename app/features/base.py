@@ -94,6 +94,10 @@ class FeatureView(pn.viewable.Viewer):
     def visible(self):
         return self.study.view == self.NAME
 
+    @property
+    def built(self):
+        return self._layout is not None
+
     def __panel__(self):
         if self._layout is None:
             self._layout = self.layout()
