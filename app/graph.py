@@ -38,7 +38,7 @@ class Graph:
         self.change = None  # (old, new) of the property being set (Model.trigger, just before invalidate)
         self.full = True  # no walk yet
         self.joined = []
-        self.roots = ()
+        self.roots = []  # the roots' ids at the last walk
 
     def note(self):
         """Take the change the invalidation is for."""
@@ -66,8 +66,7 @@ def settle(manager):
     document = manager._document()
     if document is None:
         return
-    roots = document.roots
-    if state.full or len(roots) != len(state.roots) or any(a is not b for a, b in zip(roots, state.roots)):
+    if state.full or [root.id for root in document.roots] != state.roots:
         manager.recompute()
         return
     if not state.joined:
@@ -85,14 +84,19 @@ def settle(manager):
         if model.id in models:
             continue
         models[model.id] = model
-        if model.name is not None:
-            manager._models_by_name.add_value(model.name, model)
         attached.append(model)
         visit_immediate_value_references(model, join)
-    manager._models = models
+    try:
+        for model in attached:
+            model._attach_document(document)  # raises for a model of another document, as in a walk
+    except Exception:
+        state.full = True  # the next settle walks, and attaches what this one left
+        raise
     for model in attached:
-        model._attach_document(document)
+        if model.name is not None:
+            manager._models_by_name.add_value(model.name, model)
         manager._new_models.add(model)
+    manager._models = models
 
 
 def install():
@@ -123,7 +127,8 @@ def install():
         state = graph(self)
         ORIGINAL["recompute"](self)
         document = self._document()
-        state.full, state.joined, state.roots = False, [], tuple(document.roots) if document is not None else ()
+        state.full, state.joined = False, []
+        state.roots = [root.id for root in document.roots] if document is not None else []
 
     def _pop_freeze(self):
         self._freeze_count -= 1

@@ -13,6 +13,7 @@ from urllib.parse import parse_qsl, urlencode
 
 import panel as pn
 import param
+from panel.io.state import set_curdoc
 
 from cosymp.errors import InputError, RunError
 
@@ -283,7 +284,8 @@ class App(param.Parameterized):
             if view is None:
                 LOG.info(SPARE_LAYOUTS, self._doc.session_context.id)
                 return
-            view.__panel__()
+            with set_curdoc(self._doc):
+                view.__panel__()
         self._doc.add_timeout_callback(self._layouts_ahead, AHEAD_MS)
 
     def _paced(self, event):

@@ -263,7 +263,8 @@ class Spares:
         """A page has loaded: build the spares that are wanted and missing, once the server is idle."""
         for key in set(cls.wanted) - set(cls.ready) - cls.building:
             cls.building.add(key)
-            asyncio.ensure_future(cls._build(key, *cls.wanted[key]))
+            # In a context of its own: the loading page's (its curdoc) would reach the spare's callbacks.
+            asyncio.get_running_loop().create_task(cls._build(key, *cls.wanted[key]), context=contextvars.Context())
 
     @classmethod
     async def _build(cls, key, request, app):

@@ -10,7 +10,6 @@ methods the first (A) is drawn solid and on top, the second (B) dashed beneath i
 where they overlap (A is slightly transparent, so B shows where the orbits cross; a dense band of A
 still hides B).
 """
-import contextlib
 import html
 import math
 import re
@@ -357,15 +356,24 @@ def push(update):
     results): a change made while the browser pulls the document could be lost for good. BokehJS
     drops a change message that arrives before the document, which it expects to hold the change,
     but the server writes the document it serialised before the change after the change's message
-    (a map finished while its page connected was never drawn). The document's model graph is
-    recomputed once, at the end, and only if a change asked for it (`deferred_graph`)."""
+    (a map finished while its page connected was never drawn). The document's map of its models is
+    brought up to date once, at the end (Bokeh's freeze; app/graph.py makes it follow what changed),
+    even where update() raises: Bokeh's own freeze() stays frozen then, and no model added to the
+    page afterwards would have reached it."""
     doc = pn.state.curdoc
     context = getattr(doc, "session_context", None)
     if context is not None and context.session is not None and not pn.state.loaded:
         pn.state.onload(update)
         return
-    with unlocked(), (doc.models.freeze() if doc is not None else contextlib.nullcontext()):
-        update()
+    with unlocked():
+        if doc is None:
+            update()
+            return
+        doc.models._push_freeze()
+        try:
+            update()
+        finally:
+            doc.models._pop_freeze()
 
 
 def pane(fig, **kw):

@@ -48,9 +48,12 @@ def test_a_page_s_map_follows_its_build_its_tabs_and_scene_changes_and_tabs_join
         walks.clear()
         steps = 0
         for step in app._ahead_work():
+            held = set(doc.models)
+            doc.models.flush_synced()  # as a message sent leaves it
             push(step)
             steps += 1
             assert_map_is_the_walk(doc, f"step {steps} built ahead")
+            assert doc.models._new_models == set(doc.models) - held, "what the next message sends whole" 
         assert steps > 10 and walks == [], "tabs built ahead join by adding references: no walk"
         for i, f in enumerate(FEATURES):
             push(lambda name=f.name: app._show(name))
@@ -111,3 +114,40 @@ def test_a_layout_s_new_children_join_the_map_at_the_end_of_one_push(walks):
     assert walks == [] and doc.models._freeze_count == 0
     assert figure.document is doc and figure.x_range.document is doc
     assert_map_is_the_walk(doc, "appended")
+
+
+def test_a_push_that_raises_leaves_the_document_unfrozen_and_its_additions_attached(walks):
+    """Bokeh's freeze() stays frozen when its body raises; push's must not, or nothing added to the
+    page afterwards would ever reach it."""
+    doc = Document()
+    column = pn.Column(pn.pane.Markdown("a"))
+    doc.add_root(column.get_root(doc))
+    first, later = plotting.figure("first"), plotting.figure("later")
+
+    def fails():
+        column.append(pn.pane.Bokeh(first))
+        raise ValueError("a bad update")
+
+    with set_curdoc(doc):
+        with pytest.raises(ValueError):
+            push(fails)
+        assert doc.models._freeze_count == 0 and first.document is doc
+        column.append(pn.pane.Bokeh(later))
+    assert later.document is doc
+    assert_map_is_the_walk(doc, "after a failed push")
+
+
+def test_a_model_of_another_document_fails_as_in_bokeh_and_the_next_change_walks(walks):
+    doc, other = Document(), Document()
+    fig = plotting.figure("t")
+    doc.add_root(fig)
+    foreign = Div(text="elsewhere")
+    other.add_root(foreign)
+    walks.clear()
+    mine = Div(text="mine")
+    with pytest.raises(RuntimeError):
+        fig.above = [*fig.above, mine, foreign]
+    other.remove_root(foreign)
+    fig.above = [*fig.above, Div(text="more")]  # the next change walks: the failed one left models to attach
+    assert walks.count(doc.models) == 1 and mine.document is doc and foreign.document is doc
+    assert_map_is_the_walk(doc, "after the foreign model left its document")

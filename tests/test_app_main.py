@@ -512,7 +512,7 @@ def test_a_spare_builds_its_tabs_layouts_while_it_waits_and_its_page_only_has_th
     """A session built as a spare (page.Spares) builds the layout of each tab built ahead, one per step,
     while the server is idle (App._layouts_ahead): nothing joins its document, so the page's first
     document stays as small. Its page's building ahead then has no layout step left, and its load
-    stops the spare's steps."""
+    stops the spare's steps, as its end does."""
     from bokeh.document import Document
     from panel.io.state import set_curdoc
 
@@ -526,7 +526,6 @@ def test_a_spare_builds_its_tabs_layouts_while_it_waits_and_its_page_only_has_th
     finally:
         page.Spares._building.reset(building)
     assert scheduled == [app._layouts_ahead]
-    doc._session_context = lambda: types.SimpleNamespace(id="spare-id")  # for the log line
     ahead = [f.name for f in FEATURES if f.ahead]
     page.Activity.touch()
     app._layouts_ahead()
@@ -536,7 +535,8 @@ def test_a_spare_builds_its_tabs_layouts_while_it_waits_and_its_page_only_has_th
         for k in range(len(ahead) - 1):
             app._layouts_ahead()
             assert sum(app.views[n].built for n in ahead) == k + 2, "one layout a step"
-        assert len(scheduled) == len(ahead) + 1 and not caplog.records
+        assert len(scheduled) == len(ahead) + 1 and not [r for r in caplog.records if r.name == page.LOG.name]
+        doc._session_context = lambda: types.SimpleNamespace(id="spare-id")  # for the log line
         app._layouts_ahead()
         assert page.SPARE_LAYOUTS % "spare-id" in caplog.text and len(scheduled) == len(ahead) + 1
     assert doc.roots == [] and len(doc.models) == 0, "the spare's document is not touched"
@@ -545,13 +545,17 @@ def test_a_spare_builds_its_tabs_layouts_while_it_waits_and_its_page_only_has_th
     plain = main.App()
     assert sum(s.__qualname__.endswith("__panel__") for s in plain._ahead_work() if hasattr(s, "__qualname__")) \
         == len(ahead) - 1, "a page's own session builds every layout ahead but the one it shows"
-    scheduled.clear()
-    spare = main.App()
-    spare._doc = doc
-    spare._loaded = True
-    spare._layouts_ahead()
-    assert scheduled == [] and not spare.views["structure"].built, "a page that has loaded builds its own"
-    for a in (app, plain, spare):
+    ended = []
+    for end in ("_flush", "_stop"):
+        spare = main.App()
+        spare._doc = Document()
+        monkeypatch.setattr(spare._doc, "add_timeout_callback", lambda callback, ms: scheduled.append(callback))
+        scheduled.clear()
+        getattr(spare, end)() if end == "_flush" else spare._stop(None)
+        spare._layouts_ahead()
+        assert scheduled == [] and not spare.views["structure"].built, f"after {end}: nothing more"
+        ended.append(spare)
+    for a in (app, plain, *ended):
         a._stop(None)
 
 
