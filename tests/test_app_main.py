@@ -540,18 +540,20 @@ def test_a_spare_builds_its_tabs_layouts_while_it_waits_and_its_page_only_has_th
         app._layouts_ahead()
         assert page.SPARE_LAYOUTS % "spare-id" in caplog.text and len(scheduled) == len(ahead) + 1
     assert doc.roots == [] and len(doc.models) == 0, "the spare's document is not touched"
-    steps = [step.__qualname__ for step in app._ahead_work() if hasattr(step, "__qualname__")]
-    assert not any(q.endswith("__panel__") for q in steps), "the page only has them join"
+
+    def layout_steps(a):
+        return sum(getattr(step, "__qualname__", "").endswith("__panel__") for step in a._ahead_work())
+
+    assert layout_steps(app) == 0, "the page only has them join"
     plain = main.App()
-    assert sum(s.__qualname__.endswith("__panel__") for s in plain._ahead_work() if hasattr(s, "__qualname__")) \
-        == len(ahead) - 1, "a page's own session builds every layout ahead but the one it shows"
+    assert layout_steps(plain) == len(ahead) - 1, "a page's own session builds every layout ahead but the one it shows"
     ended = []
-    for end in ("_flush", "_stop"):
+    for end, call in (("_flush", lambda a: a._flush()), ("_stop", lambda a: a._stop(None))):
         spare = main.App()
         spare._doc = Document()
         monkeypatch.setattr(spare._doc, "add_timeout_callback", lambda callback, ms: scheduled.append(callback))
         scheduled.clear()
-        getattr(spare, end)() if end == "_flush" else spare._stop(None)
+        call(spare)
         spare._layouts_ahead()
         assert scheduled == [] and not spare.views["structure"].built, f"after {end}: nothing more"
         ended.append(spare)
