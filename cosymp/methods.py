@@ -23,7 +23,7 @@ def _fixed(x, kind=float):
     """Numbers as a tuple, whose length is part of its numba type: a loop compiled for it knows the
     count at compile time and unrolls it (the Gauss methods' stages, and so the size of their
     Newton solve: 1.5-1.8x faster steps; Euler's and RK4's: 1.1-1.35x. Measured with cosymp
-    bench and benchmarks/plain.py)."""
+    bench and benchmarks/plain.py; the time offsets of Theta, Boris and Exact, see kernels.families)."""
     return tuple(kind(v) for v in np.ravel(x))
 
 
@@ -42,12 +42,12 @@ def _explicit(A, b, c):
 def _lifted(theta):
     """The paper's cotangent lift of R_d(q, v) = (q - theta v, q + (1 - theta) v):
     q at theta, p at 1 - theta, t at t_k + theta h (PHYSICS.md section 2)."""
-    return Theta(1.0 - theta, theta, theta, 1.0 - theta, _floats([theta]))
+    return Theta(1.0 - theta, theta, theta, 1.0 - theta, _fixed([theta]))
 
 
 def _naive(theta):
     """The ordinary theta-method: q, p and t all at the same theta point."""
-    return Theta(1.0 - theta, theta, 1.0 - theta, theta, _floats([theta]))
+    return Theta(1.0 - theta, theta, 1.0 - theta, theta, _fixed([theta]))
 
 
 def _composition(gammas):
@@ -294,7 +294,7 @@ METHODS = {m.name: m for m in (
            lambda: compose(_lifted(0.5), _triple_jump(_TJ4, 4))),
     Method("boris", "Boris push", "the standard charged-particle pusher (drift-kick-drift, fields at "
            "the half step); volume-preserving, gauge-independent", 2, "volume",
-           lambda: Boris(_floats([0.0, 0.5, 1.0])), requires="fields"),
+           lambda: Boris(_fixed([0.0, 0.5, 1.0])), requires="fields"),
     Method("leapfrog", "Störmer-Verlet leapfrog", "explicit splitting of a separable H: half drift (T and "
            "t), kick (V), half drift; symplectic on the extended phase space, one force per step", 2,
            "symplectic", lambda: compose(LEAPFROG, [1.0]), requires="separable"),
@@ -319,7 +319,7 @@ METHODS = {m.name: m for m in (
            "for a perturbation of size eps", 4, "symplectic",
            lambda: Perturbed(*_splitting(*ABA864)), requires="integrable"),
     Method("exact", "Exact flow", "the scene's closed-form flow", 0, "exact",
-           lambda: Exact(_floats([0.0, 1.0])), requires="flow"),
+           lambda: Exact(_fixed([0.0, 1.0])), requires="flow"),
 )}
 
 

@@ -23,7 +23,17 @@ def solve(A, B, n, k):
     """Overwrite the leading n x k block of B with A^-1 B (partial pivoting); A is destroyed.
 
     B is 2-D (k right-hand sides) or 1-D (k = 1). Returns False if a pivot is exactly zero.
+
+    A 2 x 2 system (a one-degree-of-freedom scene's implicit step and step matrix) is solved by
+    Cramer's rule, which is forward stable for n = 2 (Higham, Accuracy and Stability of Numerical
+    Algorithms, 2nd ed., section 1.10.1) and takes no pivot's comparison (damped midpoint's step
+    21.5 -> 20 ns); by elimination where the determinant is zero or not finite. See _cramer.
     """
+    if n == 2:
+        det = A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]
+        if det != 0.0 and det - det == 0.0:  # nonzero and finite, real or complex
+            _cramer(A, B, det, k)
+            return True
     for c in range(n):
         p = _pivot(A, c, n)
         if p < 0:
@@ -90,6 +100,15 @@ def substitute(A, piv, B, n, k):
         _scale_row(B, c, A[c, c], k)
 
 
+def _cramer(A, B, det, k):
+    """B <- A^-1 B for a 2 x 2 A of determinant det. A vector (a state's update) is divided by det:
+    the same matrix step after step, a reciprocal's rounding is the same scale error every step
+    (the rotations of tests/test_hard_cases.py drifted from |z| by up to 1.3e-12 in 1000 steps
+    multiplied by 1 / det, 6.5e-13 by elimination, 5.0e-13 divided). Columns (a step or tangent
+    map) are multiplied by 1 / det, one division for all (a rotation's ensembles 6.2e-13, 3.6e-13
+    by elimination): a division there cost the fused run of damped midpoint 3 ns a step."""
+
+
 def _swap_rows(B, a, b, k):
     """Swap rows a and b of B (a vector, or k columns)."""
 
@@ -100,6 +119,23 @@ def _axpy_rows(B, i, c, f, k):
 
 def _scale_row(B, c, f, k):
     """Row c of B *= f."""
+
+
+@overload(_cramer, jit_options=_IR_INLINE, inline="always")
+def _cramer_impl(A, B, det, k):
+    if B.ndim == 1:
+        def cramer(A, B, det, k):
+            b0, b1 = B[0], B[1]
+            B[0] = (A[1, 1] * b0 - A[0, 1] * b1) / det
+            B[1] = (A[0, 0] * b1 - A[1, 0] * b0) / det
+    else:
+        def cramer(A, B, det, k):
+            inv = 1.0 / det
+            for j in range(k):
+                b0, b1 = B[0, j], B[1, j]
+                B[0, j] = (A[1, 1] * b0 - A[0, 1] * b1) * inv
+                B[1, j] = (A[0, 0] * b1 - A[1, 0] * b0) * inv
+    return cramer
 
 
 @overload(_swap_rows, jit_options=_IR_INLINE, inline="always")

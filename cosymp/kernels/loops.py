@@ -283,6 +283,7 @@ def _matrix_loop(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, s
     _record_start(t0, Z, PT, Trec, Zrec, PTrec, dZrec, P)
     S, Cc = PT.copy(), np.zeros_like(PT)
     rec = np.int64(1)  # int64 from the start, as the helpers' other int arguments (LITERALS)
+    due = stride  # a countdown: a remainder per step, (k + 1) % stride, is an integer division
     prev = 0
     tau = 0.0
     up = down = 1.0
@@ -290,7 +291,10 @@ def _matrix_loop(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, s
         e, tau, up, down, tk = _step_start(D, P, t0, h, k, k == 0, scaled, prev, tau, up, down, C, reusable)
         prev = e
         s = lmatrix(D, P, C, tk, h, M, Q, LW)
-        recording = (k + 1) % stride == 0 or k + 1 == nsteps
+        due -= 1
+        recording = due == 0 or k + 1 == nsteps
+        if due == 0:
+            due = stride
         for i in range(Z.shape[0]):
             quad = apply_matrix(Z, i, M, Q, old, zs, z, P, e, up, down)
             _rescale(z, P, e, up, down)
