@@ -1,8 +1,11 @@
 """Small dense linear algebra for implicit steps (real or complex, any size)."""
-from numba import njit
+from numba import njit, types
 from numba.extending import overload
 
 from .dispatch import _IR_INLINE, IR_INLINE
+
+TINY = 2.2250738585072014e-308  # the smallest normal double: 1 / det is finite above it
+SINGULAR_2X2 = 4.0 * 2.220446049250313e-16  # det within this of |a d| + |b c| is round-off of 0
 
 
 @njit(**IR_INLINE)
@@ -20,18 +23,24 @@ def _pivot(A, c, n):
 
 @njit(**IR_INLINE)
 def solve(A, B, n, k):
-    """Overwrite the leading n x k block of B with A^-1 B (partial pivoting); A is destroyed.
+    """Overwrite the leading n x k block of B with A^-1 B; A is destroyed (as scratch).
 
-    B is 2-D (k right-hand sides) or 1-D (k = 1). Returns False if a pivot is exactly zero.
+    B is 2-D (k right-hand sides) or 1-D (k = 1). By elimination with partial pivoting; returns False
+    if a pivot is exactly zero.
 
-    A 2 x 2 system (a one-degree-of-freedom scene's implicit step and step matrix) is solved by
+    A 2 x 2 system (the Newton steps and step matrices of the theta family and of midpoint
+    compositions on a one-degree-of-freedom scene; Gauss's stage systems are larger) is solved by
     Cramer's rule, which is forward stable for n = 2 (Higham, Accuracy and Stability of Numerical
     Algorithms, 2nd ed., section 1.10.1) and takes no pivot's comparison (damped midpoint's step
-    21.5 -> 20 ns); by elimination where the determinant is zero or not finite. See _cramer.
+    21.5 -> 20 ns). Elimination takes it where det is not a normal number clear of its own round-off
+    (SINGULAR_2X2): an exactly singular A, whose det an FMA can leave at 1e-17 instead of 0, a det
+    that overflows, or one whose reciprocal would. See _cramer.
     """
     if n == 2:
-        det = A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]
-        if det != 0.0 and det - det == 0.0:  # nonzero and finite, real or complex
+        ad, bc = A[0, 0] * A[1, 1], A[0, 1] * A[1, 0]
+        det = ad - bc
+        size = _size(det)
+        if size >= TINY and size > SINGULAR_2X2 * (_size(ad) + _size(bc)):  # False for inf or NaN too
             _cramer(A, B, det, k)
             return True
     for c in range(n):
@@ -85,7 +94,7 @@ def factor(A, piv, n):
 def substitute(A, piv, B, n, k):
     """Overwrite the leading n x k block of B with A^-1 B, A and piv from `factor`: every row swap
     first (the multipliers moved with their rows), then the same operations on each row of B as
-    `solve`'s, so the same result."""
+    `solve`'s elimination, so the same result."""
     for c in range(n):
         if piv[c] != c:
             _swap_rows(B, c, piv[c], k)
@@ -98,6 +107,10 @@ def substitute(A, piv, B, n, k):
         for j in range(c + 1, n):
             _axpy_rows(B, c, j, -A[c, j], k)
         _scale_row(B, c, A[c, c], k)
+
+
+def _size(x):
+    """|x| of a real x; |Re x| + |Im x| of a complex one (no square root)."""
 
 
 def _cramer(A, B, det, k):
@@ -119,6 +132,13 @@ def _axpy_rows(B, i, c, f, k):
 
 def _scale_row(B, c, f, k):
     """Row c of B *= f."""
+
+
+@overload(_size, jit_options=_IR_INLINE, inline="always")
+def _size_impl(x):
+    if isinstance(x, types.Complex):
+        return lambda x: abs(x.real) + abs(x.imag)
+    return lambda x: abs(x)
 
 
 @overload(_cramer, jit_options=_IR_INLINE, inline="always")
