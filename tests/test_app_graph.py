@@ -53,7 +53,7 @@ def test_a_page_s_map_follows_its_build_its_tabs_and_scene_changes_and_tabs_join
             push(step)
             steps += 1
             assert_map_is_the_walk(doc, f"step {steps} built ahead")
-            assert doc.models._new_models == set(doc.models) - held, "what the next message sends whole" 
+            assert doc.models._new_models == set(doc.models) - held, "what the next message sends whole"
         assert steps > 10 and walks == [], "tabs built ahead join by adding references: no walk"
         for i, f in enumerate(FEATURES):
             push(lambda name=f.name: app._show(name))

@@ -1,11 +1,12 @@
 """Small dense linear algebra for implicit steps (real or complex, any size)."""
+import numpy as np
 from numba import njit, types
 from numba.extending import overload
 
 from .dispatch import _IR_INLINE, IR_INLINE
 
-TINY = 2.2250738585072014e-308  # the smallest normal double: 1 / det is finite above it
-SINGULAR_2X2 = 4.0 * 2.220446049250313e-16  # det within this of |a d| + |b c| is round-off of 0
+TINY = float(np.finfo(float).tiny)  # the smallest normal double: 1 / det is finite above it
+SINGULAR_2X2 = 4.0 * float(np.finfo(float).eps)  # det within this of |a d| + |b c| is round-off of 0
 
 
 @njit(**IR_INLINE)

@@ -366,8 +366,7 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
         mapped = map_in == 0
         if mapped:
             map_in = every
-        if map_in > 0:
-            map_in -= 1
+        map_in -= 1
         if mapped:
             for r in range(m):
                 zs[r] = y[r]
