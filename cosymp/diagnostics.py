@@ -143,14 +143,18 @@ def paper_symplectic_form(traj, i=1, j=2):
 
 
 def paper_volume_form(traj, members=None):
-    """The paper's estimator: det[X^1 ... X^(2n+1)] of increments in (q, t, p) of nearby members."""
+    """The paper's estimator: det[X^1 ... X^(2n+1)] of increments X^i = (dq^i, h, dp^i) of nearby
+    members. Taken as the fused loop takes it (kernels.survey._volume): X^i - X^1 for i >= 2 has 0
+    under t, so the determinant is (-1)^n h det[X^i - X^1 in (q, p)]. The increments of nearby
+    members are nearly parallel, and their differences first (exact where two are within a factor
+    of 2) leave the determinant's round-off at that of the differences: against the exact
+    determinant of the same increments, 3e-15 relative where the LU of the raw rows gave 1e-12
+    (damped, modulated), and 4e-7 where it gave 1e-2 (charged, two degrees of freedom)."""
     dZ = traj.increments[1:]
     n = traj.q.shape[-1]
     members = list(range(1, 2 * n + 2)) if members is None else list(members)
     X = dZ[:, members]
-    dt = np.full(X.shape[:2] + (1,), traj.h)
-    cols = np.concatenate([X[..., :n], dt, X[..., n:]], axis=-1)
-    return np.linalg.det(np.swapaxes(cols, 1, 2))
+    return (-1) ** n * traj.h * np.linalg.det(X[:, 1:] - X[:, :1])
 
 
 def separation_omega(traj, i=1, j=None):

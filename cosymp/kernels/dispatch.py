@@ -202,7 +202,7 @@ shift = _dispatched("shift", 2, "Time shift tau of the scaling exponent e: shift
 step = _dispatched("step", 8, "One step of family D for one member: step(D, P, C, t, h, z, pt, W) -> (status, pt)")
 work = _dispatched("work", 3, "Stack work arrays of family D: work(D, P, like)", scratch=True)
 lmatrix = _dispatched("lmatrix", 8, "Step matrices of family D on a linear scene: "
-                      "lmatrix(D, P, C, t, h, M, Q, W) -> s")
+                      "lmatrix(D, P, C, t, h, M, Q, W) -> s; M alone where Q has no rows (s may then be 0)")
 lwork = _dispatched("lwork", 2, "Stack work arrays of family D's step matrices: lwork(D, P)",
                     scratch=True)
 ndof = _constant("ndof", "Degrees of freedom n of the scene (z has 2n entries).")
