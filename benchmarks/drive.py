@@ -11,6 +11,8 @@ timed in one process, interleaved, best of R, after an untimed warm-up:
 * run: the fused driver with every figure `cosymp run` gives (max |H + p_t|, max |det M_k - 1|,
   the symplecticity defect, absolute and relative), as run_summary drives it;
 * fused: the same and the growth product of every step's map (what a sweep's point forms).
+* long run: the app's Long run view (summary.long_drive): every figure of `run`, the paper's
+  volume estimator from three nearby members, and min/max envelopes over 20,000 bins.
 * two passes: what `cosymp run` did before the fused driver (every step recorded in chunks of
   2^18, tangent maps formed in a second pass, det and M^T J M - J in NumPy).
 
@@ -30,6 +32,9 @@ import numpy as np
 from cosymp.diagnostics import det_deviation, symplecticity_defect, tangent_maps
 from cosymp.drive import CHUNK, Drive
 from cosymp.integrate import Setup, simulate
+from cosymp.summary import long_drive
+
+LONG_BINS = 20_000  # app.features.longrun's (the benchmark imports no app code)
 
 C_SOURCE = r"""
 #include <math.h>
@@ -100,8 +105,13 @@ def main(argv=None):
         d.run(n)
         return d.Z[0]
 
+    def run_long():
+        d = long_drive(setup, h, math.ceil(n / LONG_BINS))
+        d.run(n)
+        return d.Z[0]
+
     cases = {"C": run_c, "step": run_step, "run": lambda: run_fused(False), "fused": lambda: run_fused(True),
-             "two passes": lambda: two_passes(setup, h, n)}
+             "long run": run_long, "two passes": lambda: two_passes(setup, h, n)}
     finals = {name: fn() for name, fn in cases.items()}  # warm-up (and compilation)
     best = dict.fromkeys(cases, math.inf)
     for _ in range(args.repeats):
