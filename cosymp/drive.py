@@ -50,7 +50,10 @@ class Drive:
     and costs nothing; without maps or growth no map is formed). Calls of `advance`
     continue the run as one call would (the steps are numbered from the run's start); bins and
     the maps' sampling are counted from the run's first step when each call's length is a
-    multiple of `unit`.
+    multiple of `unit` (and so are the nearby members' states, which on a linear scene take the
+    step matrix at the mapped steps: kernels.survey._member). Those members' p_t (PT[1:]) is
+    then the step matrix's quadratic form's, as in `simulate`'s ensembles of a linear scene
+    (no figure reads it): a splitting's reads Q off by polarization and carries its round-off.
     """
 
     def __init__(self, setup, h, z0=None, pt0=None, t0=0.0, every=1, width=0, growth=False, energy=True,

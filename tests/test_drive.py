@@ -217,22 +217,26 @@ def test_comparison_figures_match_numpy_diagnostics(scene, method, stride):
 def test_volume_estimator_is_the_determinant_of_its_increments(scene, method):
     """The fused loop's volume estimator against the exact (rational) determinant of the same
     recorded increments: within 64 eps of h times the product of the norms of the differences
-    X^i - X^1 (Hadamard's bound of the determinant it takes; the LU of the raw rows (X^i, h)
-    exceeded it 140, 128 and 3 times on the one-degree-of-freedom cases here). Charged's
-    differences are nearly singular (det 1e-21 of that bound), where the bound could not see a
-    wrong sign: each value also within 1e-3 relative of the exact one (measured 4e-7 there; the
-    raw rows' LU 1e-2)."""
+    X^i - X^1 (Hadamard's bound of the determinant it takes; a margin over its round-off where the
+    differences of nearby increments are exact, as Sterbenz's lemma gives them within a factor of 2,
+    and the LU's growth is small; the LU of the raw rows (X^i, h) exceeded it 140, 128 and 3 times
+    on the one-degree-of-freedom cases here). Charged's differences are nearly singular (det 1e-21
+    of that bound), where the bound could not see a wrong sign: each value also within 1e-3
+    relative of the exact one (measured 4e-7 there; the raw rows' LU 1e-2), and so is NumPy's
+    diagnostics.paper_volume_form of the same run."""
     s = Setup.make(scene, method)
     h = s.scene.h
     n = s.scene.ndof
     c = compare(s, h, STEPS * h)
     X = c.run.increments[1:, 1:2 * n + 2]
+    numpy_volume = paper_volume_form(c.run)
     for k in range(len(X)):
         rows = [[Fraction(float(v)) for v in (*x[:n], h, *x[n:])] for x in X[k]]
         exact = float(exact_determinant(rows))
         bound = np.prod(np.linalg.norm(X[k, 1:] - X[k, :1], axis=-1))
         assert abs(c.paper_volume[k] - exact) <= 64 * np.finfo(float).eps * h * bound, (k, c.paper_volume[k], exact)
         assert abs(c.paper_volume[k] - exact) <= 1e-3 * abs(exact), (k, c.paper_volume[k], exact)
+        assert abs(numpy_volume[k] - exact) <= 1e-3 * abs(exact), (k, numpy_volume[k], exact)
 
 
 def exact_determinant(rows):

@@ -394,7 +394,7 @@ def tangent_matrix(D, P, h, T, Z, PT, M):
     D, P, T, M = borrow((D, P, T, M))
     C = coef_table(D, P)
     LW = lwork(D, P)
-    Q = matrices(P, 1, 0.0)[0]
+    Q = matrices(P, 1, 0.0)[0][:0]  # M alone (kernels.linear)
     for k in range(T.shape[0]):
         tau = scaling_at(P, T[k])[1]
         _coefs(D, P, T[k], T[k] + h, h, tau, C, False)
