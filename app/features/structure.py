@@ -12,7 +12,11 @@ VOLUME_TEXT = ("<h4>Volume form</h4><p class='doc'>Left, the paper's estimator a
                "of the one-step increments X<sup>i</sup> = z<sup>i</sup><sub>k+1</sub> − z<sup>i</sup><sub>k</sub> "
                "of 2n+1 nearby runs in (q, t, p) (three for one degree of freedom). Right, the rigorous "
                "check: |det M<sub>k</sub> − 1| of the one-step tangent map on the time slice, 0 to round-off "
-               "for a volume-preserving method (exact zeros are drawn at 1e-17, or a decade below the smallest nonzero value).</p>")
+               "for a volume-preserving method (exact zeros are drawn at 1e-17, or a decade below the smallest nonzero value). "
+               "On a linear scene the increments' differences are (M<sub>k</sub> − I)(z<sup>i</sup> − z<sup>1</sup>), "
+               "so the estimator is (−1)<sup>n</sup> h det(M<sub>k</sub> − I) det[z<sup>i</sup> − z<sup>1</sup>]: "
+               "on the charged scene M<sub>k</sub> has the eigenvalue 1 (twice), the estimator is 0 for every "
+               "method, and its plot shows round-off (below 1e-42), not the method.</p>")
 SYMPLECTIC_TEXT = ("<h4>Symplectic form</h4><p class='doc'>The paper's estimator as printed: ω(X¹, X²) of "
                    "the one-step increments of two nearby runs. Rigorous checks: max |M<sub>k</sub>ᵀ J "
                    "M<sub>k</sub> − J| of the one-step tangent map (0 to round-off when symplectic), "
