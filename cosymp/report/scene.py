@@ -68,7 +68,9 @@ def scene_report(setups, h, T, cmd, progress=None, computed=None):
             ("|det M_k − 1| and ||M_kᵀ J M_k − J|| of the one-step tangent maps M_k (rigorous: round-off for a "
             f"structure-preserving method), and the paper's estimators as printed: ω(X¹, X²) and {volume_name(scene)} "
             "of the one-step increments of nearby trajectories (they follow the increments' size, so they are "
-            "not constant even for a symplectic map).")], _structure_figures(scene, ok)),
+            "not constant even for a symplectic map). On a linear scene the volume estimator is "
+            "(−1)ⁿ h det(M_k − I) det[zⁱ − z¹]: where M_k has the eigenvalue 1 (the charged scene's, twice) "
+            "it is 0 for every method and its plot is round-off.")], _structure_figures(scene, ok)),
     ]
     return Report(f"cosymp report: {scene.title}, {' vs '.join(s.method.label(s.theta) for s in setups)}",
                   [f"h = {h:g}, T = {T:g}."], sections, cmd)
