@@ -210,6 +210,21 @@ class Job(param.Parameterized):
         key = self._key(inputs) if self.KEEP and inputs is not None else None
         return None if key is None else REMEMBERED.get((self.KIND, key))
 
+    def remember_ahead(self):
+        """Compute, in its thread, the result of the current inputs that the server remembers for
+        every page (KEEP) if it remembers none yet, nothing runs and the memory it leases is free
+        (a spare session's idle time: main.App._layouts_ahead). Returns whether it started."""
+        if not self.KEEP or self.running or self._closed:
+            return False
+        try:
+            inputs = self._inputs()
+            if inputs is None or self._remembered(inputs) is not None or not memory.BUDGET.fits(self._bytes(inputs)):
+                return False
+        except InputError:
+            return False
+        self.request()
+        return True
+
     def start(self):
         """Start a computation unless one is running (a button's action)."""
         if not self.running:

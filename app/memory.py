@@ -61,6 +61,11 @@ class MemoryBudget:
             self.used += nbytes
         return Lease(self, nbytes)
 
+    def fits(self, nbytes):
+        """Whether a lease of nbytes would be granted now."""
+        with self._lock:
+            return self.used + nbytes <= self.cap
+
     def _give_back(self, nbytes):
         with self._lock:
             self.used -= nbytes

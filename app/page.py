@@ -177,7 +177,7 @@ class Activity:
 LOG = logging.getLogger("panel.cosymp")
 SPARE_BUILT = "cosymp: spare session %s built in %.2f s"
 SPARE_HANDED = "cosymp: a page got spare session %s"
-SPARE_LAYOUTS = "cosymp: spare session %s has built its tabs' layouts"
+SPARE_READY = "cosymp: spare session %s has built its tabs' layouts and computed what the server remembers"
 
 
 class Spares:
@@ -195,7 +195,8 @@ class Spares:
     kept from the server's check for unused sessions until it is handed out, and then until its page
     has loaded (`loaded`) or HANDED_S have passed (its browser connects within a second or two; one
     that never does is then discarded as any page's session). While it waits, a spare builds its
-    tabs' layouts in the server's idle time (main.App._layouts_ahead)."""
+    tabs' layouts in the server's idle time, and computes the results of its inputs the server
+    remembers for every page (main.App._layouts_ahead)."""
 
     IDLE_S = 2.0
     HANDED_S = 60.0

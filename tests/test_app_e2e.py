@@ -16,6 +16,7 @@ from playwright.sync_api import expect
 from served import ARTIFACTS, CHROMIUM, SERVER_LOG, START_TIMEOUT_S, TABLE_JS, TABLE_ROW, WAIT_MS, query
 
 from app.features.stabilitymap import significant
+from app.page import SPARE_READY
 from cosymp.scenes import SCENES, first, lead
 
 pytestmark = [
@@ -62,7 +63,8 @@ def test_opens_on_the_first_view_and_a_slider_updates_the_plots(page):
 
 def test_a_page_without_settings_gets_a_session_built_before_it_was_asked_for(page):
     """app/page.Spares: once a page without settings has loaded and the server has been idle, a
-    session of the first view is built (the server's log says so); the next page without settings
+    session of the first view is built, with its tabs' layouts and the results the server remembers
+    (the server's log says so); the next page without settings
     gets it, and works as any page (the first view drawn, its URL written, a scene change, a tab
     whose layout the spare built while it waited); a link with settings gets a session of its own,
     built with them. (Twice at first: the server's very first page is asked for before the app has
@@ -76,9 +78,9 @@ def test_a_page_without_settings_gets_a_session_built_before_it_was_asked_for(pa
         spares = built.findall(log.read_text())
         handed = set(re.findall(r"cosymp: a page got spare session (\S+)", log.read_text()))
         waiting = [s for s in spares if s not in handed]
-        if waiting and f"cosymp: spare session {waiting[-1]} has built its tabs' layouts" in log.read_text():
+        if waiting and SPARE_READY % waiting[-1] in log.read_text():
             break
-        assert time.monotonic() < deadline, "no spare session was built, with its tabs' layouts, within 60 s"
+        assert time.monotonic() < deadline, "no spare session was built and made ready within 60 s"
         page.page.wait_for_timeout(250)
     page.open()
     assert f"cosymp: a page got spare session {waiting[-1]}" in log.read_text()

@@ -8,8 +8,9 @@ import types
 
 import panel as pn
 
-from app import main, page
+from app import jobs, main, page
 from app.features import FEATURES, base, theta, workprecision
+from app.jobs import Job
 from cosymp.scenes import SCENES
 
 
@@ -536,10 +537,32 @@ def test_a_spare_builds_its_tabs_layouts_while_it_waits_and_its_page_only_has_th
             app._layouts_ahead()
             assert sum(app.views[n].built for n in ahead) == k + 2, "one layout a step"
         assert len(scheduled) == len(ahead) + 1 and not [r for r in caplog.records if r.name == page.LOG.name]
+        remembering = [s for s in app.states.values() if isinstance(s, Job) and s.KEEP]
+        assert sorted(s.KIND for s in remembering) == ["long run", "stability map"]
+        page.Activity.touch()
+        app._layouts_ahead()
+        assert not jobs.REMEMBERED, "not idle: nothing computed"
+        page.Activity.last -= main.AHEAD_IDLE_S
+        app.study.running = True
+        app._layouts_ahead()
+        assert not jobs.REMEMBERED, "nothing while a computation of the spare runs"
+        app.study.running = False
+        for k in range(len(remembering)):
+            app._layouts_ahead()  # without a server a computation runs to its end in the call
+            assert len(jobs.REMEMBERED) == k + 1, "one computation a step"
+        assert app.states["long"].data and app.states["map"].result is not None
+        assert len(scheduled) == len(ahead) + 3 + len(remembering)
         doc._session_context = lambda: types.SimpleNamespace(id="spare-id")  # for the log line
         app._layouts_ahead()
-        assert page.SPARE_LAYOUTS % "spare-id" in caplog.text and len(scheduled) == len(ahead) + 1
+        assert page.SPARE_READY % "spare-id" in caplog.text and len(scheduled) == len(ahead) + 3 + len(remembering)
     assert doc.roots == [] and len(doc.models) == 0, "the spare's document is not touched"
+    other = main.App()
+    other.study.view = "long"
+    assert other.states["long"].data.keys() == app.states["long"].data.keys()
+    assert "by this server" in other.states["long"].status, "another page with the defaults recalls it"
+    other.study.view = "map"
+    assert "by this server" in other.states["map"].status
+    other._stop(None)
 
     def layout_steps(a):
         return sum(getattr(step, "__qualname__", "").endswith("__panel__") for step in a._ahead_work())

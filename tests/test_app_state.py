@@ -747,6 +747,26 @@ def test_a_long_run_any_page_completed_is_shown_at_once_to_the_next_that_asks():
     assert again.run is not None and again.status.startswith("done: 30000 steps")
 
 
+def test_a_result_the_server_remembers_is_computed_ahead_once_not_while_running_and_only_within_the_memory_free(monkeypatch):
+    """Job.remember_ahead (a spare session's idle time, main.App._layouts_ahead): it computes a result
+    the server remembers (KEEP) once; not a remembered one again, not while its job runs, and not
+    when its lease would not be granted now (nothing is said then: no page asked for it)."""
+    s = Study(scene="damped")
+    lr = longrun.LongRun(s, T_long=2000.0)
+    monkeypatch.setattr(memory.BUDGET, "used", memory.BUDGET.cap - longrun.LONG_RUN_BYTES + 1)
+    assert not lr.remember_ahead() and lr.run is None and s.message is None
+    monkeypatch.setattr(memory.BUDGET, "used", 0)
+    lr.running = True
+    assert not lr.remember_ahead() and lr.run is None
+    lr.running = False
+    assert lr.remember_ahead() and lr.status.startswith("done: 20000 steps") and memory.BUDGET.used == 0
+    again = longrun.LongRun(Study(scene="damped"), T_long=2000.0)
+    assert not again.remember_ahead() and again.run is None, "remembered: nothing to compute"
+    lr.T_long = 1e8
+    assert not lr.remember_ahead() and s.message is None, "refused inputs: nothing, and nothing said"
+    assert not Study().remember_ahead(), "a result no page recalls (KEEP = 0) is not computed ahead"
+
+
 def test_long_run_refuses_a_horizon_over_the_cap():
     s = Study(scene="damped")
     lr = longrun.LongRun(s, T_long=1e8)
