@@ -104,6 +104,7 @@ class App(param.Parameterized):
             if f.url:
                 self.states[f.name].param.watch(lambda e: self._write_url(), list(f.url))
         self._ahead_done = set()
+        self._remembering = []  # a spare's jobs computing what the server remembers (`_remember_ahead`)
         self._ahead_steps = self._ahead_work()
         self.pace = pn.widgets.IntInput(value=0, visible=False)
         self._sent = -1  # the last step's odd number (`_ahead`)
@@ -154,7 +155,7 @@ class App(param.Parameterized):
         if self._stopped:
             return
         self._stopped = True
-        for state in self.states.values():
+        for state in [*self.states.values(), *self._remembering]:
             if state is not None:
                 state.release()
         self.study.release()
@@ -278,23 +279,32 @@ class App(param.Parameterized):
         its tabs join: their layouts took the server 40-130 ms each there, and a tab's first visit
         in the page's first seconds waited for the one under way, or built its own.
 
-        It then computes, one at a time, the results of the first view's inputs that the server
-        remembers for every page (Job.remember_ahead: the Long run's and the Stability map's,
-        0.05-0.1 s each here) where it remembers none yet, so once per server: a first visit of
-        those tabs in a page's first second recalled nothing and computed, in a second message
-        (Long run 0.6-0.9 s to its plots settled, recalled 0.48 s; Stability map 0.38-0.48,
-        recalled 0.28)."""
+        It then computes, one at a time, the results of its inputs that the server remembers for
+        every page (`_remember_ahead`) where it remembers none yet, so once per server: a first
+        visit of the Long run or the Stability map in a page's first second recalled nothing and
+        computed, in a second message (Long run 0.6-0.9 s to its plots settled, recalled 0.48 s;
+        Stability map 0.38-0.48, recalled 0.28)."""
         if self._stopped or self._loaded:
             return
-        if Activity.idle(AHEAD_IDLE_S) and not any(j.running for j in self.jobs):
+        if Activity.idle(AHEAD_IDLE_S) and not any(j.running for j in self._remembering):
             view = next((self.views[f.name] for f in FEATURES if f.ahead and not self.views[f.name].built), None)
             with set_curdoc(self._doc):
                 if view is not None:
                     view.__panel__()
-                elif not any(s.remember_ahead() for s in self.states.values() if isinstance(s, Job)):
+                elif not self._remember_ahead():
                     LOG.info(SPARE_READY, self._doc.session_context.id)
                     return
         self._doc.add_timeout_callback(self._layouts_ahead, AHEAD_MS)
+
+    def _remember_ahead(self):
+        """Start the next computation of the study's inputs whose result the server remembers for
+        every page (Job.remember_ahead: the Long run's and the Stability map's, 0.05-0.1 s each
+        here), in a job of its own (with the feature's defaults, as a spare's own states have): the
+        page's jobs, which its spinner follows, stay idle, so the spare's document is not touched
+        while its page may be pulling it. Returns whether one started."""
+        if not self._remembering:
+            self._remembering = [type(s)(self.study) for s in self.states.values() if isinstance(s, Job) and s.KEEP]
+        return any(j.remember_ahead() for j in self._remembering)
 
     def _paced(self, event):
         """The page has drawn the last step built ahead and is idle: the next one AHEAD_MS later, a gap in

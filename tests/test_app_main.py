@@ -543,22 +543,25 @@ def test_a_spare_builds_its_tabs_layouts_while_it_waits_and_its_page_only_has_th
         app._layouts_ahead()
         assert not jobs.REMEMBERED, "not idle: nothing computed"
         page.Activity.last -= main.AHEAD_IDLE_S
-        app.study.running = True
+        app._layouts_ahead()  # without a server a computation runs to its end in the call
+        assert len(jobs.REMEMBERED) == 1, "one computation a step"
+        app._remembering[0].running = True
         app._layouts_ahead()
-        assert not jobs.REMEMBERED, "nothing while a computation of the spare runs"
-        app.study.running = False
-        for k in range(len(remembering)):
-            app._layouts_ahead()  # without a server a computation runs to its end in the call
-            assert len(jobs.REMEMBERED) == k + 1, "one computation a step"
-        assert app.states["long"].data and app.states["map"].result is not None
-        assert len(scheduled) == len(ahead) + 3 + len(remembering)
+        assert len(jobs.REMEMBERED) == 1, "nothing while one of them runs"
+        app._remembering[0].running = False
+        app._layouts_ahead()
+        assert sorted(kind for kind, _ in jobs.REMEMBERED) == ["long run", "stability map"]
+        assert not app.states["long"].data and app.states["map"].result is None and not any(
+            j.running for j in app.jobs), "in jobs of its own: the page's (its spinner's) stay idle"
+        assert len(scheduled) == len(ahead) + 5
         doc._session_context = lambda: types.SimpleNamespace(id="spare-id")  # for the log line
         app._layouts_ahead()
-        assert page.SPARE_READY % "spare-id" in caplog.text and len(scheduled) == len(ahead) + 3 + len(remembering)
+        assert page.SPARE_READY % "spare-id" in caplog.text and len(scheduled) == len(ahead) + 5
     assert doc.roots == [] and len(doc.models) == 0, "the spare's document is not touched"
     other = main.App()
     other.study.view = "long"
-    assert other.states["long"].data.keys() == app.states["long"].data.keys()
+    computed = next(j for j in app._remembering if j.KIND == "long run")
+    assert other.states["long"].data.keys() == computed.data.keys() and other.states["long"].data
     assert "by this server" in other.states["long"].status, "another page with the defaults recalls it"
     other.study.view = "map"
     assert "by this server" in other.states["map"].status
@@ -582,6 +585,7 @@ def test_a_spare_builds_its_tabs_layouts_while_it_waits_and_its_page_only_has_th
         ended.append(spare)
     for a in (app, plain, *ended):
         a._stop(None)
+    assert all(j._closed for j in app._remembering), "its own jobs stop with the page"
 
 
 def test_building_a_pages_session_is_no_change_its_load_is(monkeypatch):
