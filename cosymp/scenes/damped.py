@@ -140,8 +140,8 @@ SCENE = Scene(
              "scaled coordinates, so both runs reach T, and H + p_t stays bounded.",
              "symplectic-euler", "rk4", 0.1, 7000.0, values={"gamma": 0.2}, hard=True),
         Case("Damped beyond floating point",
-             "At t = 7098 the true q passes 1.8e308: each run stops there with a message and shows its "
-             "data up to that step.",
+             "Near t = 7098 the true q passes 1.8e308: each run stops just before (t ≈ 7094, where its "
+             "next step would overflow) with a message and shows its data up to that step.",
              "symplectic-euler", "rk4", 0.1, 7500.0, values={"gamma": 0.2}, hard=True, fails=("symplectic-euler", "rk4")),
     ),
     # max |H + p_t| over h x gamma: the band's size, smooth in both (as h^2 for midpoint). Growth is

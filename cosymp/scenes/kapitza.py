@@ -56,7 +56,7 @@ SCENE = Scene(
              "watch the pendulum stay up, wobbling at the drive frequency.",
     equations=(r"H(q,p,t) = \tfrac12 p^2 - \big(\omega_0^2 - a\nu^2\cos(\nu t)\big)\cos q",
                (r"\dot q = p,\quad \dot p = -\big(\omega_0^2 - a\nu^2\cos(\nu t)\big)\sin q,\quad "
-               r"\dot p_t = -a\nu^3\sin(\nu t)\cos q"),
+               r"\dot p_t = a\nu^3\sin(\nu t)\cos q"),
                r"a\,\nu > \sqrt2\,\omega_0 \;\Rightarrow\; q=\pi \text{ stable (Kapitza)}"),
     params=(
         Param("w0", 1.0, "small-swing frequency sqrt(g/l) of the undriven pendulum", (0.0, 100.0)),
