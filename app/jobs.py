@@ -331,6 +331,7 @@ class Job(param.Parameterized):
             text = failure_text(run.error)
             self.status = f"failed after {elapsed:.1f} s: {text}"
             self.say(Note("error", f"{self.KIND} failed: {text}"))
+            self._failed(run.inputs)
         else:
             if self.HOLD:
                 previous, self._held = self._held, run.lease
@@ -371,6 +372,9 @@ class Job(param.Parameterized):
 
     def _refused(self):
         """Called when the inputs were refused (the message is said)."""
+
+    def _failed(self, inputs):
+        """Called on the loop when the computation of these inputs failed (the message is said)."""
 
     def _started(self, inputs):
         """Called on the loop when a computation starts."""

@@ -17,7 +17,7 @@ from functools import cache
 import panel as pn
 import param
 
-from cosymp.errors import InputError
+from cosymp.errors import InputError, RunError
 from cosymp.integrate import Setup, check_step, default_stride
 from cosymp.methods import METHODS
 from cosymp.reference import fine_steps, reference_states
@@ -105,6 +105,7 @@ class Runs:
     h: float
     T: float
     entries: tuple
+    reference_failure: str = ""  # the message of a reference run that stopped (live_reference)
 
     @property
     def ok(self):
@@ -137,8 +138,16 @@ def takes_reference(setup, h, T):
 
 def live_reference(setup, h, T):
     """(states at every multiple of h, label) of the reference the scene's errors are measured
-    against (`takes_reference`), or None."""
-    return reference_states(setup, h, T) if takes_reference(setup, h, T) else None
+    against (`takes_reference`), or None; the message of a reference run that stopped (overflow)
+    as a str: then no error is measured, and the methods' runs are still shown (it failed the whole
+    comparison: charged with beta(t) = exp(t), whose fine rk8 run overflows at t = 8.2 while
+    midpoint's reaches T)."""
+    if not takes_reference(setup, h, T):
+        return None
+    try:
+        return reference_states(setup, h, T)
+    except RunError as err:
+        return str(err)
 
 
 def final_error(comparison, failure):
@@ -154,21 +163,24 @@ def run_pair(scene, setups, h, T):
         reference = pool.submit(live_reference, setups[0], h, T)
         done = list(pool.map(lambda s: compare_until_failure(s, h, T), setups))
         reference = reference.result()
+    stopped = reference if isinstance(reference, str) else ""
     entries = []
     for s, (comparison, failure) in zip(setups, done):
         label = s.method.label(s.theta)
         if any(e.label == label for e in entries):
             label += " (2)"
-        if comparison is not None and reference is not None:
+        if comparison is not None and reference is not None and not stopped:
             comparison = with_reference(comparison, reference[0], h, reference[1])
         entries.append(Entry(label, s.method.name, comparison, failure, final_error(comparison, failure)))
-    return Runs(scene, h, T, tuple(entries))
+    return Runs(scene, h, T, tuple(entries), stopped)
 
 
 def failure_note(runs):
     texts = [f"{e.label}: {e.failure}" + (f"; showing data up to t = {e.comparison.run.t[-1]:.6g}"
                                           if e.comparison is not None else "")
              for e in runs.entries if e.failure]
+    if runs.reference_failure:
+        texts.append(f"the reference run (rk8 at a fine step) stopped, {runs.reference_failure}: no error is measured")
     return Note("warning", " | ".join(texts)) if texts else None
 
 
@@ -283,7 +295,12 @@ class Study(Job):
         return tuple(Setup.make(scene, m, self.values, theta_for(m, self.theta)) for m in (self.method, self.other))
 
     def check_horizon(self):
+        """The live views' number of steps T/h (rounded up), or InputError saying what to change: a
+        step longer than T (a single step far past T, judged as a run to T) or more steps than the live
+        views take."""
         steps = check_step(self.h, self.T)
+        if self.h > self.T:
+            raise InputError(f"h = {self.h:g} is longer than T = {self.T:g}: pass a step h of at most T")
         if steps > LIVE_MAX_STEPS:
             raise InputError(f"T/h = {steps:.3g} steps is beyond the live views' limit of "
                              f"{LIVE_MAX_STEPS:.0e}: increase h, shorten T, or use the Long run view")
@@ -352,6 +369,13 @@ class Study(Job):
 
     def _refused(self):
         self._restore()
+
+    def _failed(self, inputs):
+        """A comparison that failed as a whole leaves the last good one shown: its inputs are put
+        back too, unless they changed meanwhile (the box held beta(t) = exp(t) while every plot showed
+        the previous beta)."""
+        if {k: getattr(self, k) for k in self.INPUTS} == inputs[4]:
+            self._restore()
 
     def _inputs(self):
         setups = self.setups()

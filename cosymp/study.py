@@ -66,8 +66,8 @@ class Comparison:
             "max |M^T J M - J|": finite_max(self.symp_dev) if self.symp_dev.size else 0.0,
             "final relative error": None if self.error is None else float(self.error[-1]),
             "steps": int(self.run.steps),
-            "integration time (s)": self.run.wall_s,
-            "CPU time with diagnostics (s)": self.cpu_s,
+            "integration time, wall clock (s)": self.run.wall_s,
+            "CPU time with diagnostics, its thread (s)": self.cpu_s,
         }
 
 

@@ -1,6 +1,7 @@
 """What the comparison views share: the two methods' slots, their colour key, the numbers table,
 the phase portraits' axes and series taken from a comparison."""
 import html
+import math
 
 import numpy as np
 
@@ -140,7 +141,7 @@ def phase_note(kept, lost, bounded):
 
 
 NUMBER_ROWS = ("max |H + p_t|", "max |det M - 1|", "max |M^T J M - J|", "final relative error", "steps",
-               "integration time (s)", "CPU time with diagnostics (s)")
+               "integration time, wall clock (s)", "CPU time with diagnostics, its thread (s)")
 
 
 def numbers(runs):
@@ -149,8 +150,15 @@ def numbers(runs):
     for e in runs.entries if runs is not None else ():
         summary = {**(e.comparison.summary if e.comparison is not None else {}),
                    "final relative error": e.final_error}
-        cols[e.label] = [fmt(summary.get(k)) for k in NUMBER_ROWS] + [e.failure or "reached T"]
+        cols[e.label] = [fmt(summary.get(k)) for k in NUMBER_ROWS] + [e.failure or (ended(e.comparison.run, runs.T) if e.comparison is not None else "")]
     return cols
+
+
+def ended(run, T):
+    """Where a run that did not stop reached: T, or the end of its last whole step past T (a run
+    takes T/h rounded up steps of h)."""
+    t = float(run.t[-1])
+    return "reached T" if math.isclose(t, T, rel_tol=1e-8) else f"ran to t = {t:.6g} (T is not a whole number of steps)"
 
 
 TAIL = 0.02  # the last part of a run drawn bold over its whole orbit in the portraits

@@ -12,12 +12,13 @@ import panel as pn
 import param
 
 from cosymp.drive import CHUNK
+from cosymp.errors import InputError
 from cosymp.integrate import check_step
 from cosymp.report.style import pair_colors
 from cosymp.summary import long_drive
 
 from ..jobs import Job, Note
-from ..plotting import SLOTS, Curves, grid, note, swatch
+from ..plotting import SLOTS, Curves, grid, note, push, swatch
 from ..study import DELTA
 from .base import Feature, FeatureView
 
@@ -76,6 +77,7 @@ class LongRun(Job):
         super().__init__(study=study, **params)
         self._said = set()
         self._steps_done = 0
+        self._ran = None  # the key (`_key`) of the run shown
         study.param.watch(self._on_scene, ["scene"])
 
     def _on_scene(self, event):
@@ -99,14 +101,30 @@ class LongRun(Job):
     def _bytes(self, inputs):
         return LONG_RUN_BYTES
 
-    def _started(self, inputs):
+    @staticmethod
+    def describe(inputs):
         setups, h, steps, values, scene = inputs
         labels = " vs ".join(x.method.label(x.theta) for x in setups)
         shown = ", ".join(f"{k} = {v}" for k, v in values.items())
+        return f"{scene}: {labels}, h = {h:g}, T = {steps * h:g}" + (f", {shown}" if shown else "")
+
+    def since(self):
+        """'' while the sidebar and the horizon ask for the run shown (or none is shown), else what they
+        ask for now (`describe`): a long run starts on Start long run, a first visit or another scene,
+        not on every change of the sidebar."""
+        if not self.data or self.running or self._ran is None:
+            return ""
+        try:
+            inputs = self._inputs()
+        except InputError:
+            return ""
+        return "" if self._key(inputs) == self._ran else self.describe(inputs)
+
+    def _started(self, inputs):
         self._said = set()
         self._steps_done = 0
-        self.param.update(data={}, status="running",
-                          setting=f"{scene}: {labels}, h = {h:g}, T = {steps * h:g}" + (f", {shown}" if shown else ""))
+        self._ran = self._key(inputs)
+        self.param.update(data={}, status="running", setting=self.describe(inputs))
 
     def _compute(self, inputs, run):
         setups, h, steps, _, _ = inputs
@@ -233,19 +251,36 @@ class LongRunView(FeatureView):
                          lr.param.setting, lr.param.status)
         self.plots = {k: Curves(title, "t", label, log=log) for k, (title, label, log, _) in PLOTS.items()}
         self.key = note("")
+        self.since = note("")
         self.follow(lr, "data")
+        lr.param.watch(self._say_since, ["data", "running", "T_long"])
+        self.study.param.watch(self._say_since, ["method", "other", "h", "theta", "values"])
         return pn.Column(
             note("<p>The study's scene, methods, parameters and h, run to the long horizon in chunks off the "
                  "event loop. The plots show per-bin envelopes (each bin's min and max, or max) as they "
                  "arrive; the page stays usable meanwhile.</p>"),
             pn.Row(pn.widgets.FloatInput.from_param(lr.param.T_long, width=180), start, cancel, progress),
-            note(status), self.key,
+            note(status), self.since, self.key,
             grid(*[c.panel for c in self.plots.values()]),
             sizing_mode="stretch_width")
 
     def wanted(self):
         if not self.state.data and not self.state.busy:
             self.state.request()
+
+    def shown(self):
+        super().shown()
+        self._say_since()
+
+    def _say_since(self, *events):
+        """Say, while the tab is shown, when the run shown is not what the sidebar now asks for (the
+        Stability map says so too); a hidden tab's text follows when it is shown."""
+        if self.built and self.visible:
+            ask = self.state.since()
+            text = ("" if not ask else f"<p class='doc since'><b>Computed before the latest changes</b> (now "
+                    f"{html.escape(ask)}): press Start long run to run them.</p>")
+            if text != self.since.object:
+                push(lambda: setattr(self.since, "object", text))
 
     def update(self):
         data = self.state.data
