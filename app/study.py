@@ -300,7 +300,8 @@ class Study(Job):
         views take."""
         steps = check_step(self.h, self.T)
         if self.h > self.T:
-            raise InputError(f"h = {self.h:g} is longer than T = {self.T:g}: pass a step h of at most T")
+            raise InputError(f"h = {self.h:g} is longer than T = {self.T:g}: a run takes whole steps of h, so pass "
+                             "h <= T")
         if steps > LIVE_MAX_STEPS:
             raise InputError(f"T/h = {steps:.3g} steps is beyond the live views' limit of "
                              f"{LIVE_MAX_STEPS:.0e}: increase h, shorten T, or use the Long run view")

@@ -73,7 +73,8 @@ def verdict(runs):
     tenth = max(len(after) // 10, 1)
     growth = float(np.nanmax(after[-tenth:]) / max(np.nanmax(after[:tenth]), np.finfo(float).tiny))
     stopped = [e.label for e in (ke, le) if e.failure]
-    until = (f"Up to T = {runs.T:g}" if not stopped else
+    until = ((f"Up to T = {runs.T:g}" if math.isclose(float(lr.t[-1]), runs.T, rel_tol=1e-8) else
+              f"Up to t = {lr.t[-1]:.6g}") if not stopped else
              f"Up to t = {min(kr.t[-1], lr.t[-1]):.6g}, where {html.escape(' and '.join(stopped))} stopped (see the "
              "message)")
     rounding = within_roundoff(kr)
