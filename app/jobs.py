@@ -210,17 +210,22 @@ class Job(param.Parameterized):
         key = self._key(inputs) if self.KEEP and inputs is not None else None
         return None if key is None else REMEMBERED.get((self.KIND, key))
 
-    def remember_ahead(self):
-        """Compute, in its thread, the result of the current inputs that the server remembers for
-        every page (KEEP) if it remembers none yet, nothing runs and the memory it leases is free
-        (a spare session's idle time: main.App._layouts_ahead). Returns whether it started."""
-        if not self.KEEP or self.running or self._closed:
+    def remembers_ahead(self):
+        """Whether the server remembers results of this job for every page (KEEP) and none of its
+        current inputs yet, and the memory the computation leases is free now."""
+        if not self.KEEP:
             return False
         try:
             inputs = self._inputs()
-            if inputs is None or self._remembered(inputs) is not None or not memory.BUDGET.fits(self._bytes(inputs)):
-                return False
+            return inputs is not None and self._remembered(inputs) is None and memory.BUDGET.fits(self._bytes(inputs))
         except InputError:
+            return False
+
+    def remember_ahead(self):
+        """Compute, in its thread, the result of the current inputs that the server remembers for
+        every page, where `remembers_ahead` and nothing runs (a spare session's idle time:
+        main.App._remember_ahead). Returns whether it started."""
+        if self.running or self._closed or not self.remembers_ahead():
             return False
         self.request()
         return True

@@ -18,9 +18,9 @@ from panel.io.state import set_curdoc
 from cosymp.errors import InputError, RunError
 
 from .features import FEATURES
-from .jobs import Job, Note
+from .jobs import FAILURES, Job, Note, failure_text
 from .memory import Collector, log_when_freed, map_large_blocks
-from .page import LOG, SCRIPTS, SPARE_READY, Activity, Design, Spares, adjust_panel, serve_locally
+from .page import LOG, SCRIPTS, SPARE_READY, SPARE_SAID, Activity, Design, Spares, adjust_panel, serve_locally
 from .plotting import katex_fonts_css, push, rule
 from .presets import URL_NAMES, parse_items, query_items
 from .study import Controls, PresetLinks, SceneInfo, Study, study_report
@@ -104,7 +104,8 @@ class App(param.Parameterized):
             if f.url:
                 self.states[f.name].param.watch(lambda e: self._write_url(), list(f.url))
         self._ahead_done = set()
-        self._remembering = []  # a spare's jobs computing what the server remembers (`_remember_ahead`)
+        self._ahead_pending = None  # a spare's jobs still to try, computing what the server remembers
+        self._remembering = []  # their study and the ones started (`_remember_ahead`), released when done
         self._ahead_steps = self._ahead_work()
         self.pace = pn.widgets.IntInput(value=0, visible=False)
         self._sent = -1  # the last step's odd number (`_ahead`)
@@ -280,9 +281,9 @@ class App(param.Parameterized):
         in the page's first seconds waited for the one under way, or built its own.
 
         It then computes, one at a time, the results of its inputs that the server remembers for
-        every page (`_remember_ahead`) where it remembers none yet, so once per server: a first
+        every page where it remembers none yet (`_remember_ahead`), so once per server: a first
         visit of the Long run or the Stability map in a page's first second recalled nothing and
-        computed, in a second message (Long run 0.6-0.9 s to its plots settled, recalled 0.48 s;
+        computed, in a second message (Long run 0.6-0.9 s to its plots settled, recalled 0.4-0.5 s;
         Stability map 0.38-0.48, recalled 0.28)."""
         if self._stopped or self._loaded:
             return
@@ -297,14 +298,34 @@ class App(param.Parameterized):
         self._doc.add_timeout_callback(self._layouts_ahead, AHEAD_MS)
 
     def _remember_ahead(self):
-        """Start the next computation of the study's inputs whose result the server remembers for
-        every page (Job.remember_ahead: the Long run's and the Stability map's, 0.05-0.1 s each
-        here), in a job of its own (with the feature's defaults, as a spare's own states have): the
-        page's jobs, which its spinner follows, stay idle, so the spare's document is not touched
-        while its page may be pulling it. Returns whether one started."""
-        if not self._remembering:
-            self._remembering = [type(s)(self.study) for s in self.states.values() if isinstance(s, Job) and s.KEEP]
-        return any(j.remember_ahead() for j in self._remembering)
+        """Start the next computation whose result the server remembers for every page (Job.KEEP:
+        the Long run's and the Stability map's, 0.1-0.2 s each here) of this page's inputs, where it
+        remembers none yet and the memory is free; each is tried once. They run in jobs of their
+        own, on a study of their own (the same inputs): nothing of the page's changes (its spinner
+        follows its own jobs, its toasts its study's messages: its document is not touched while its
+        page may be pulling it), and nothing of theirs stays on the page's study. What they would
+        say goes to the server's log. Returns whether one started."""
+        try:
+            if self._ahead_pending is None:
+                wanted = [type(s) for s in self.states.values() if isinstance(s, Job) and s.remembers_ahead()]
+                self._ahead_pending = []
+                if wanted:
+                    study = Study(**{k: getattr(self.study, k) for k in Study.INPUTS})
+                    study.param.watch(lambda e: e.new is not None and LOG.info(SPARE_SAID, e.new.text), "message")
+                    self._remembering = [study]  # released with the jobs (its comparison holds a lease)
+                    self._ahead_pending = [cls(study) for cls in wanted]
+            while self._ahead_pending:
+                job = self._ahead_pending.pop(0)
+                if job.remember_ahead():
+                    self._remembering.append(job)
+                    return True
+        except FAILURES as err:  # said in the log; nothing more is computed ahead
+            LOG.info(SPARE_SAID, failure_text(err))
+            self._ahead_pending = []
+        for job in self._remembering:
+            job.release()
+        self._remembering = []
+        return False
 
     def _paced(self, event):
         """The page has drawn the last step built ahead and is idle: the next one AHEAD_MS later, a gap in

@@ -177,7 +177,8 @@ class Activity:
 LOG = logging.getLogger("panel.cosymp")
 SPARE_BUILT = "cosymp: spare session %s built in %.2f s"
 SPARE_HANDED = "cosymp: a page got spare session %s"
-SPARE_READY = "cosymp: spare session %s has built its tabs' layouts and computed what the server remembers"
+SPARE_READY = "cosymp: spare session %s has built its tabs' layouts and has nothing more to compute ahead"
+SPARE_SAID = "cosymp: a spare's computation ahead: %s"
 
 
 class Spares:

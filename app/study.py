@@ -105,7 +105,7 @@ class Runs:
     h: float
     T: float
     entries: tuple
-    reference_failure: str = ""  # the message of a reference run that stopped (live_reference)
+    reference_failure: str = ""  # where and why a reference run stopped (run_pair)
 
     @property
     def ok(self):
@@ -138,16 +138,8 @@ def takes_reference(setup, h, T):
 
 def live_reference(setup, h, T):
     """(states at every multiple of h, label) of the reference the scene's errors are measured
-    against (`takes_reference`), or None; the message of a reference run that stopped (overflow)
-    as a str: then no error is measured, and the methods' runs are still shown (it failed the whole
-    comparison: charged with beta(t) = exp(t), whose fine rk8 run overflows at t = 8.2 while
-    midpoint's reaches T)."""
-    if not takes_reference(setup, h, T):
-        return None
-    try:
-        return reference_states(setup, h, T)
-    except RunError as err:
-        return str(err)
+    against (`takes_reference`), or None."""
+    return reference_states(setup, h, T) if takes_reference(setup, h, T) else None
 
 
 def final_error(comparison, failure):
@@ -162,14 +154,19 @@ def run_pair(scene, setups, h, T):
     with ThreadPoolExecutor(len(setups) + 1) as pool:
         reference = pool.submit(live_reference, setups[0], h, T)
         done = list(pool.map(lambda s: compare_until_failure(s, h, T), setups))
-        reference = reference.result()
-    stopped = reference if isinstance(reference, str) else ""
+        # A reference run that stops (overflow) leaves the runs shown without errors: it failed the
+        # whole comparison (charged with beta(t) = exp(t): the fine rk8 run overflows at t = 8.2,
+        # RK4 at 7.6, and midpoint reaches T).
+        try:
+            reference, stopped = reference.result(), ""
+        except RunError as err:
+            reference, stopped = None, f"stopped at t = {err.time:.6g} ({str(err).split(' in step')[0]})"
     entries = []
     for s, (comparison, failure) in zip(setups, done):
         label = s.method.label(s.theta)
         if any(e.label == label for e in entries):
             label += " (2)"
-        if comparison is not None and reference is not None and not stopped:
+        if comparison is not None and reference is not None:
             comparison = with_reference(comparison, reference[0], h, reference[1])
         entries.append(Entry(label, s.method.name, comparison, failure, final_error(comparison, failure)))
     return Runs(scene, h, T, tuple(entries), stopped)
@@ -180,7 +177,7 @@ def failure_note(runs):
                                           if e.comparison is not None else "")
              for e in runs.entries if e.failure]
     if runs.reference_failure:
-        texts.append(f"the reference run (rk8 at a fine step) stopped, {runs.reference_failure}: no error is measured")
+        texts.append(f"no error is measured: the reference run (rk8 at a fine step) {runs.reference_failure}")
     return Note("warning", " | ".join(texts)) if texts else None
 
 
@@ -300,8 +297,8 @@ class Study(Job):
         views take."""
         steps = check_step(self.h, self.T)
         if self.h > self.T:
-            raise InputError(f"h = {self.h:g} is longer than T = {self.T:g}: a run takes whole steps of h, so pass "
-                             "h <= T")
+            raise InputError(f"h = {self.h:g} is longer than T = {self.T:g}: a run takes whole steps of h, so "
+                             "choose h <= T or a longer T")
         if steps > LIVE_MAX_STEPS:
             raise InputError(f"T/h = {steps:.3g} steps is beyond the live views' limit of "
                              f"{LIVE_MAX_STEPS:.0e}: increase h, shorten T, or use the Long run view")

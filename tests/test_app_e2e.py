@@ -180,7 +180,7 @@ def test_a_preset_link_opens_its_figure(page):
     damped = next(p for p in PRESETS if p.name == "Damped beyond floating point")
     page.open(damped.query())
     page.page.locator("details.presets summary").click()
-    expect(page.page.get_by_text("each run stops there with a message")).to_be_visible()
+    expect(page.page.get_by_text("each run stops just before")).to_be_visible()
     expect(page.page.locator(".notyf__message").first).to_contain_text("left floating-point range")
     # Both runs' q pass 1e308: the portrait is drawn (its auto ranges were (-inf, inf), an empty plot),
     # and the numbers table keeps both methods' columns in view (the failure message wraps).

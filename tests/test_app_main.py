@@ -8,7 +8,7 @@ import types
 
 import panel as pn
 
-from app import jobs, main, page
+from app import jobs, main, memory, page
 from app.features import FEATURES, base, theta, workprecision
 from app.jobs import Job
 from cosymp.scenes import SCENES
@@ -544,23 +544,25 @@ def test_a_spare_builds_its_tabs_layouts_while_it_waits_and_its_page_only_has_th
         assert not jobs.REMEMBERED, "not idle: nothing computed"
         page.Activity.last -= main.AHEAD_IDLE_S
         app._layouts_ahead()  # without a server a computation runs to its end in the call
-        assert len(jobs.REMEMBERED) == 1, "one computation a step"
-        app._remembering[0].running = True
+        assert [kind for kind, _ in jobs.REMEMBERED] == ["long run"], "one computation a step"
+        computed = app._remembering[-1]
+        computed.running = True
         app._layouts_ahead()
         assert len(jobs.REMEMBERED) == 1, "nothing while one of them runs"
-        app._remembering[0].running = False
+        computed.running = False
         app._layouts_ahead()
         assert sorted(kind for kind, _ in jobs.REMEMBERED) == ["long run", "stability map"]
         assert not app.states["long"].data and app.states["map"].result is None and not any(
             j.running for j in app.jobs), "in jobs of its own: the page's (its spinner's) stay idle"
+        assert computed.study is not app.study and app.study.message is None, "on a study of their own"
         assert len(scheduled) == len(ahead) + 5
         doc._session_context = lambda: types.SimpleNamespace(id="spare-id")  # for the log line
         app._layouts_ahead()
         assert page.SPARE_READY % "spare-id" in caplog.text and len(scheduled) == len(ahead) + 5
+        assert app._remembering == [] and computed._closed and computed.study._closed, "released when done"
     assert doc.roots == [] and len(doc.models) == 0, "the spare's document is not touched"
     other = main.App()
     other.study.view = "long"
-    computed = next(j for j in app._remembering if j.KIND == "long run")
     assert other.states["long"].data.keys() == computed.data.keys() and other.states["long"].data
     assert "by this server" in other.states["long"].status, "another page with the defaults recalls it"
     other.study.view = "map"
@@ -585,7 +587,51 @@ def test_a_spare_builds_its_tabs_layouts_while_it_waits_and_its_page_only_has_th
         ended.append(spare)
     for a in (app, plain, *ended):
         a._stop(None)
-    assert all(j._closed for j in app._remembering), "its own jobs stop with the page"
+
+
+def test_a_spares_computation_ahead_that_fails_is_tried_once_and_said_only_in_the_log(monkeypatch, caplog):
+    """A computation ahead that fails (or is refused) is not retried every step (it was, every 50 ms,
+    with an error posted each time), and what it says goes to the server's log, not to the page the
+    spare becomes; a spare's page that stops releases the computation under way."""
+    from bokeh.document import Document
+
+    from app.features import longrun
+
+    calls = []
+
+    def fails(self, inputs, run):
+        calls.append(inputs)
+        raise RuntimeError("boom")
+
+    monkeypatch.setattr(longrun.LongRun, "_compute", fails)
+    app = main.App()
+    app._doc = Document()  # without a session: a computation runs to its end in the call
+    monkeypatch.setattr(app._doc, "add_timeout_callback", lambda callback, ms: None)
+    for view in app.views.values():
+        view.__panel__()
+    page.Activity.last -= main.AHEAD_IDLE_S
+    with caplog.at_level("INFO", logger=page.LOG.name):
+        for _ in range(2):
+            app._layouts_ahead()
+        app._doc._session_context = lambda: types.SimpleNamespace(id="spare-id")  # for the log line
+        for _ in range(3):
+            app._layouts_ahead()
+    assert len(calls) == 1 and [kind for kind, _ in jobs.REMEMBERED] == ["stability map"]
+    assert page.SPARE_SAID % "long run failed: RuntimeError: boom" in caplog.text
+    assert page.SPARE_READY % "spare-id" in caplog.text and app.study.message is None
+    jobs.REMEMBERED.clear()
+    again = main.App()
+    monkeypatch.setattr(memory.BUDGET, "used", memory.BUDGET.cap)
+    assert not again._remember_ahead() and again._remembering == [], "no memory free: nothing"
+    monkeypatch.setattr(memory.BUDGET, "used", 0)
+    started = main.App()
+    monkeypatch.setattr(longrun.LongRun, "request", lambda self: setattr(self, "running", True))
+    assert started._remember_ahead() and started._remembering[-1].running
+    running = started._remembering[-1]
+    started._stop(None)
+    assert running._closed and all(j._closed for j in started._remembering)
+    for a in (app, again):
+        a._stop(None)
 
 
 def test_building_a_pages_session_is_no_change_its_load_is(monkeypatch):

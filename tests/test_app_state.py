@@ -11,6 +11,7 @@ import weakref
 from urllib.parse import parse_qsl, urlsplit
 
 import numpy as np
+import param
 import pytest
 
 from app import jobs, memory, plotting, study
@@ -526,17 +527,18 @@ def test_a_step_longer_than_T_is_refused_and_a_run_past_T_says_where_it_ended():
     a whole number of steps of h runs past T to the end of its last step, and the table says so."""
     s = Study(scene="damped")
     shown = s.results
+    h = s.h
     s.h = 1e6
     assert s.message.level == "error" and f"longer than T = {s.T:g}" in s.message.text
-    assert s.results is shown
+    assert s.results is shown and s.h == h, "the last good h is put back"
     s = Study(scene="decaying", h=0.3, T=1.0)
     cols = common.numbers(s.results)
-    assert [c[-1] for c in list(cols.values())[1:]] == ["ran to t = 1.2 (T is not a whole number of steps)"] * 2
+    assert [c[-1] for c in list(cols.values())[1:]] == ["ran to t = 1.2 (T/h is not a whole number)"] * 2
     s = Study(scene="decaying", h=0.25, T=1.0)
     assert [c[-1] for c in list(common.numbers(s.results).values())[1:]] == ["reached T"] * 2
 
 
-def test_a_reference_that_overflows_leaves_the_comparison_shown_without_errors(monkeypatch):
+def test_a_reference_that_overflows_leaves_the_comparison_shown_without_errors():
     """beta(t) = exp(t) on the charged scene: the fine rk8 reference overflows at t = 8.2, RK4 at 7.6,
     while midpoint reaches T. That failed the whole comparison (every plot kept the previous beta while
     its box held exp(t)); now the runs are shown, no error is measured, and the warning says why."""
@@ -546,8 +548,8 @@ def test_a_reference_that_overflows_leaves_the_comparison_shown_without_errors(m
     midpoint, rk4 = r.entries
     assert midpoint.comparison.setup.values["beta"] == "exp(t)" and not midpoint.failure
     assert midpoint.comparison.run.t[-1] == pytest.approx(s.T) and "overflow" in rk4.failure
-    assert "overflow" in r.reference_failure and all(e.final_error is None for e in r.entries)
-    assert s.message.level == "warning" and "reference run" in s.message.text and "no error is measured" in s.message.text
+    assert r.reference_failure.startswith("stopped at t = 8.246 (overflow") and all(e.final_error is None for e in r.entries)
+    assert s.message.level == "warning" and "no error is measured: the reference run" in s.message.text
 
 
 def test_a_comparison_that_fails_as_a_whole_puts_its_inputs_back(monkeypatch):
@@ -562,6 +564,10 @@ def test_a_comparison_that_fails_as_a_whole_puts_its_inputs_back(monkeypatch):
     s.values = {"gamma": 0.5}
     assert s.message.level == "error" and "comparison failed: overflow" in s.message.text
     assert s.results is shown and s.values == good and s.inputs.gamma == SCENES["damped"].values()["gamma"]
+    with param.parameterized.discard_events(s):  # a newer change, made while the failed run ran
+        s.values = {"gamma": 0.3}
+    s._failed((None, None, None, None, {**{k: getattr(s, k) for k in Study.INPUTS}, "values": {"gamma": 0.5}}))
+    assert s.values == {"gamma": 0.3}, "inputs changed since the failed run: left as they are"
 
 
 def test_the_structure_and_cloud_views_plot_the_rigorous_checks():
@@ -822,9 +828,12 @@ def test_a_long_run_says_when_the_sidebar_asks_for_another_run_than_the_one_show
     lr = longrun.LongRun(s, T_long=2000.0)
     view = drawn(longrun.LongRunView(s, lr))
     assert lr.since() == "" and view.since.object == ""
-    s.view = "long"
+    s.view = "compare"
     s.h = 0.05
     assert "h = 0.05" in lr.since() and "h = 0.1" in lr.setting
+    assert view.since.object == "", "a hidden tab's text follows when it is shown"
+    s.view = "long"
+    view.shown()
     assert "Computed before the latest changes" in view.since.object and "h = 0.05" in view.since.object
     lr.start()
     assert lr.since() == "" and view.since.object == ""
@@ -832,6 +841,8 @@ def test_a_long_run_says_when_the_sidebar_asks_for_another_run_than_the_one_show
     assert "gamma = 0.02" in lr.since()
     s.values = {}
     assert lr.since() == "", "asked for the run shown again"
+    lr.T_long = 1e9
+    assert "refused" in lr.since() and "cap" in view.since.object, "a run it would refuse is said, with why"
 
 
 def test_long_run_refuses_a_horizon_over_the_cap():

@@ -159,7 +159,7 @@ def ended(run, T):
     """Where a run that did not stop reached: T, or the end of its last whole step past T (a run
     takes T/h rounded up steps of h)."""
     t = float(run.t[-1])
-    return "reached T" if math.isclose(t, T, rel_tol=1e-8) else f"ran to t = {t:.6g} (T is not a whole number of steps)"
+    return "reached T" if math.isclose(t, T, rel_tol=1e-8) else f"ran to t = {t:.6g} (T/h is not a whole number)"
 
 
 TAIL = 0.02  # the last part of a run drawn bold over its whole orbit in the portraits

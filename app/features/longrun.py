@@ -109,16 +109,19 @@ class LongRun(Job):
         return f"{scene}: {labels}, h = {h:g}, T = {steps * h:g}" + (f", {shown}" if shown else "")
 
     def since(self):
-        """'' while the sidebar and the horizon ask for the run shown (or none is shown), else what they
-        ask for now (`describe`): a long run starts on Start long run, a first visit or another scene,
-        not on every change of the sidebar."""
+        """'' while the sidebar and the horizon ask for the run shown (or none is shown), else a
+        sentence saying what they ask for now (`describe`), or why a long run of it is refused: a long
+        run starts on Start long run, a first visit or another scene, not on every change of the
+        sidebar."""
         if not self.data or self.running or self._ran is None:
             return ""
         try:
             inputs = self._inputs()
-        except InputError:
+        except InputError as err:
+            return f"the sidebar now asks for a long run that is refused: {err}"
+        if self._key(inputs) == self._ran:
             return ""
-        return "" if self._key(inputs) == self._ran else self.describe(inputs)
+        return f"now {self.describe(inputs)}: press Start long run to run it"
 
     def _started(self, inputs):
         self._said = set()
@@ -277,8 +280,8 @@ class LongRunView(FeatureView):
         Stability map says so too); a hidden tab's text follows when it is shown."""
         if self.built and self.visible:
             ask = self.state.since()
-            text = ("" if not ask else f"<p class='doc since'><b>Computed before the latest changes</b> (now "
-                    f"{html.escape(ask)}): press Start long run to run them.</p>")
+            text = ("" if not ask else f"<p class='doc since'><b>Computed before the latest changes</b>: "
+                    f"{html.escape(ask)}.</p>")
             if text != self.since.object:
                 push(lambda: setattr(self.since, "object", text))
 
