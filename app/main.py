@@ -105,7 +105,7 @@ class App(param.Parameterized):
                 self.states[f.name].param.watch(lambda e: self._write_url(), list(f.url))
         self._ahead_done = set()
         self._ahead_pending = None  # a spare's jobs still to try, computing what the server remembers
-        self._remembering = []  # their study and the ones started (`_remember_ahead`), released when done
+        self._remembering = []  # the ones started (`_remember_ahead`), released when done or with the page
         self._ahead_steps = self._ahead_work()
         self.pace = pn.widgets.IntInput(value=0, visible=False)
         self._sent = -1  # the last step's odd number (`_ahead`)
@@ -311,8 +311,8 @@ class App(param.Parameterized):
                 self._ahead_pending = []
                 if wanted:
                     study = Study(**{k: getattr(self.study, k) for k in Study.INPUTS})
+                    study.release()  # it gives the jobs their inputs; its comparison's lease goes back now
                     study.param.watch(lambda e: e.new is not None and LOG.info(SPARE_SAID, e.new.text), "message")
-                    self._remembering = [study]  # released with the jobs (its comparison holds a lease)
                     self._ahead_pending = [cls(study) for cls in wanted]
             while self._ahead_pending:
                 job = self._ahead_pending.pop(0)
