@@ -534,6 +534,7 @@ def test_a_step_longer_than_T_is_refused_and_a_run_past_T_says_where_it_ended():
     s = Study(scene="decaying", h=0.3, T=1.0)
     cols = common.numbers(s.results)
     assert [c[-1] for c in list(cols.values())[1:]] == ["ran to t = 1.2 (T/h is not a whole number)"] * 2
+    assert "Up to t = 1.2," in common.verdict(s.results)
     s = Study(scene="decaying", h=0.25, T=1.0)
     assert [c[-1] for c in list(common.numbers(s.results).values())[1:]] == ["reached T"] * 2
 

@@ -73,8 +73,7 @@ def verdict(runs):
     tenth = max(len(after) // 10, 1)
     growth = float(np.nanmax(after[-tenth:]) / max(np.nanmax(after[:tenth]), np.finfo(float).tiny))
     stopped = [e.label for e in (ke, le) if e.failure]
-    until = ((f"Up to T = {runs.T:g}" if math.isclose(float(lr.t[-1]), runs.T, rel_tol=1e-8) else
-              f"Up to t = {lr.t[-1]:.6g}") if not stopped else
+    until = ((f"Up to T = {runs.T:g}" if reached(lr, runs.T) else f"Up to t = {lr.t[-1]:.6g}") if not stopped else
              f"Up to t = {min(kr.t[-1], lr.t[-1]):.6g}, where {html.escape(' and '.join(stopped))} stopped (see the "
              "message)")
     rounding = within_roundoff(kr)
@@ -155,11 +154,15 @@ def numbers(runs):
     return cols
 
 
+def reached(run, T):
+    """Whether a run that did not stop ended at T, not at the end of its last whole step past T (a
+    run takes T/h rounded up steps of h)."""
+    return math.isclose(float(run.t[-1]), T, rel_tol=1e-8)
+
+
 def ended(run, T):
-    """Where a run that did not stop reached: T, or the end of its last whole step past T (a run
-    takes T/h rounded up steps of h)."""
-    t = float(run.t[-1])
-    return "reached T" if math.isclose(t, T, rel_tol=1e-8) else f"ran to t = {t:.6g} (T/h is not a whole number)"
+    """Where a run that did not stop reached (`reached`)."""
+    return "reached T" if reached(run, T) else f"ran to t = {run.t[-1]:.6g} (T/h is not a whole number)"
 
 
 TAIL = 0.02  # the last part of a run drawn bold over its whole orbit in the portraits
