@@ -282,6 +282,13 @@ class Study(Job):
     def scene_obj(self):
         return SCENES[self.scene]
 
+    def checked_values(self):
+        """Every scene parameter's value, checked, or None while a refused one is in `values`."""
+        try:
+            return self.scene_obj.values(self.values)
+        except InputError:
+            return None
+
     def state(self):
         """The inputs as the URL holds them."""
         return {k: rounded(getattr(self, k)) for k in URL_NAMES}
@@ -485,6 +492,7 @@ class SceneControls(pn.viewable.Viewer):
                                  sizing_mode="stretch_width", margin=0)
         self._bind(self.study.inputs)
         self.study.param.watch(lambda e: push(lambda: self._bind(e.new)), "inputs")  # one message
+        self.study.param.watch(lambda e: self._disable_unused(), "values")
 
     def __panel__(self):
         return self._column
@@ -503,6 +511,16 @@ class SceneControls(pn.viewable.Viewer):
                 else:
                     control.unbind()
         self._glossary.object = glossary(inputs, names)
+        self._disable_unused()
+
+    def _disable_unused(self):
+        """Disable the controls of parameters the other values leave without effect (eps and w
+        with a constant beta(t), say): a slider that moves nothing would teach that it does not matter."""
+        vals = self.study.checked_values()
+        if vals is not None:
+            unused = self.study.scene_obj.unused(vals)
+            for control in self.shown():
+                control.enable(control.name not in unused)
 
 
 def glossary(inputs, names):
@@ -516,9 +534,10 @@ def glossary(inputs, names):
 class Control:
     """One pooled control: bound to a parameter of a scene's inputs (and shown), or unbound."""
 
-    def __init__(self, layout, labelled):
+    def __init__(self, layout, labelled, widgets):
         self.layout = layout
         self.labelled = labelled  # the widget carrying the label
+        self.widgets = widgets
         self.inputs = self.name = None
 
     def bind(self, inputs, name):
@@ -538,6 +557,10 @@ class Control:
     def _follow(self, event):
         if event.obj is self.inputs and event.name == self.name:
             self.show(self.inputs, self.name)
+
+    def enable(self, on):
+        for widget in self.widgets:
+            widget.disabled = not on
 
     def take(self, value):
         if self.inputs is not None and value != getattr(self.inputs, self.name):
@@ -561,7 +584,8 @@ class NumberControl(Control):
         # No start or end on the box: a typed value outside the scene's bounds must reach the
         # study, which says what is wrong and puts the last good value back.
         self.box = pn.widgets.FloatInput(label="", format="0.[00000]", width=100, align="end")
-        super().__init__(pn.Row(self.slider, self.box, sizing_mode="stretch_width", margin=0), self.slider)
+        super().__init__(pn.Row(self.slider, self.box, sizing_mode="stretch_width", margin=0), self.slider,
+                         (self.slider, self.box))
         self.slider.param.watch(lambda e: self.take(e.new), "value")
         self.box.param.watch(lambda e: self.take(e.new), "value")
 
@@ -581,7 +605,7 @@ class TextControl(Control):
     def __init__(self):
         self.widget = pn.widgets.TextInput(sizing_mode="stretch_width",
                                            placeholder="e.g. 0.05*(1 + tanh(t)), then Enter")
-        super().__init__(self.widget, self.widget)
+        super().__init__(self.widget, self.widget, (self.widget,))
         self.widget.param.watch(lambda e: self.take(e.new), "value")
 
     def show(self, inputs, name):
@@ -592,7 +616,7 @@ class TextControl(Control):
 class ChoiceControl(Control):
     def __init__(self):
         self.widget = pn.widgets.Select(sizing_mode="stretch_width")
-        super().__init__(self.widget, self.widget)
+        super().__init__(self.widget, self.widget, (self.widget,))
         self.widget.param.watch(lambda e: self.take(e.new), "value")
 
     def show(self, inputs, name):
@@ -614,6 +638,7 @@ class SceneInfo(pn.viewable.Viewer):
         self._look = note("", margin=(0, 10))
         self._show(self.study.scene)
         self.study.param.watch(lambda e: self._show(e.new), "scene")
+        self.study.param.watch(lambda e: self._show_equations(), "values")
         return pn.Column(self._head, pn.FlexBox(*self._equations, gap="1.5em", sizing_mode="stretch_width"),
                          self._look, sizing_mode="stretch_width")
 
@@ -621,12 +646,20 @@ class SceneInfo(pn.viewable.Viewer):
         s = SCENES[name]
         notes = "".join(f"<li>{html.escape(n)}</li>" for n in s.notes)
         self._head.object = f"<h2>{html.escape(s.title)}</h2><p>{html.escape(s.summary)}</p>"
-        for i, pane_ in enumerate(self._equations):
-            shown = i < len(s.equations)
-            pane_.param.update(object=f"${s.equations[i]}$" if shown else "", visible=shown)
+        self._show_equations()
         self._look.object = (f"<p class='lookfor'><b>Look for:</b> {html.escape(s.look_for)}<br><b>First view</b> "
                              f"(what the Scene menu opens): {html.escape(first(s).doc)}</p>"
                              + (f"<ul class='notes'>{notes}</ul>" if notes else ""))
+
+    def _show_equations(self):
+        """The scene's equations as its values make them (the beta(t) chosen, say)."""
+        vals = self.study.checked_values()
+        if vals is None:
+            return
+        lines = self.study.scene_obj.shown_equations(vals)
+        for i, pane_ in enumerate(self._equations):
+            shown = i < len(lines)
+            pane_.param.update(object=f"${lines[i]}$" if shown else "", visible=shown)
 
 
 class PresetLinks(pn.viewable.Viewer):

@@ -290,6 +290,37 @@ def test_switching_scenes_rebinds_the_controls_and_rebuilds_the_portraits():
     assert [c.labelled.label for c in pool if not c.layout.visible] == [""] * (len(pool) - 5)
 
 
+def test_the_charged_scenes_beta_line_and_controls_follow_the_chosen_beta():
+    """The header's last equation is the beta(t) the runs use, and the controls of the parameters it
+    leaves without effect are disabled (slider and box): eps and w with a constant beta(t), B0 too with
+    a typed one. A refused expression leaves the last good one shown; another scene enables them all."""
+    s = Study(scene="charged")
+    info = study.SceneInfo(study=s)
+    info.__panel__()
+    controls = study.SceneControls(study=s)
+
+    def line():
+        return [p.object for p in info._equations if p.visible][-1]
+
+    def disabled():
+        off = {c.name for c in controls.shown() if any(w.disabled for w in c.widgets)}
+        assert off == {c.name for c in controls.shown() if all(w.disabled for w in c.widgets)}
+        return off
+
+    assert "\\varepsilon" in line() and disabled() == set()
+    s.inputs.beta = "constant"
+    assert line() == r"$\beta(t) = B_0$" and disabled() == {"eps", "w"}
+    s.inputs.beta = "0.05*(1 + tanh(t))"
+    typed = r"$\beta(t) = 0.05 \left(1 + \tanh(t)\right)$"
+    assert line() == typed and disabled() == {"B0", "eps", "w"}
+    s.inputs.beta = "sin("
+    assert s.inputs.beta == "0.05*(1 + tanh(t))" and line() == typed and disabled() == {"B0", "eps", "w"}
+    s.scene = "modulated"
+    assert disabled() == set() and "\\varepsilon" in line()
+    s.scene = "charged"
+    assert disabled() == set() and line() == f"${SCENES['charged'].equations[-1]}$"
+
+
 def test_scenes_of_one_shape_share_the_portraits_relabelled_with_fresh_ranges():
     """Each shape's figures join the page once and are then shown or hidden; a scene change relabels
     them and tells the page to follow the new data again (a counter in the figure's tags, which a

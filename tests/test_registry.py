@@ -59,6 +59,26 @@ def test_a_scenes_declarations_name_its_own_parameters_and_known_measures(scene)
         assert s.mechanical is not None and s.gauge_map is not None and s.gauge_jacobian is not None
 
 
+@pytest.mark.parametrize("scene", list(SCENES))
+def test_a_scenes_defaults_print_its_equations_and_leave_no_parameter_unused(scene):
+    s = SCENES[scene]
+    assert s.shown_equations(s.values()) == s.equations and s.unused(s.values()) == ()
+
+
+@pytest.mark.parametrize("beta,line", [("constant", r"\beta(t) = B_0"),
+                                       ("0.05*(1 + tanh(t))", r"\beta(t) = 0.05 \left(1 + \tanh(t)\right)")])
+def test_the_charged_scene_prints_the_beta_it_runs_and_its_unused_parameters_change_nothing(beta, line):
+    """The last equation is the chosen beta(t); a parameter `unused` names leaves the run bit-identical
+    (a control that moves nothing is disabled in the app), the others change it."""
+    s = SCENES["charged"]
+    vals = s.values({"beta": beta})
+    assert s.shown_equations(vals) == s.equations[:-1] + (line,)
+    z = simulate(Setup.make("charged", "midpoint", {"beta": beta}), 0.01, 2.0).z[-1]
+    for name in ("B0", "eps", "w"):
+        moved = simulate(Setup.make("charged", "midpoint", {"beta": beta, name: 0.7}), 0.01, 2.0).z[-1]
+        assert np.array_equal(moved, z) == (name in s.unused(vals)), name
+
+
 @pytest.mark.parametrize("scene,case", CASES, ids=[f"{s.name}: {c.name}" for s, c in CASES])
 def test_every_declared_case_runs_as_it_says(scene, case):
     """Both of its methods apply; those it declares as failing stop early with a RunError naming the

@@ -258,6 +258,14 @@ class Scene:
             vals[name] = known[name].check(value)
         return vals
 
+    def shown_equations(self, vals):
+        """The equations as these values make them (checked values, as `values` returns)."""
+        return self.equations
+
+    def unused(self, vals):
+        """The parameters these values leave without effect."""
+        return ()
+
     def pack(self, vals):
         return self.Params(*(float(vals[f]) for f in self.Params._fields))
 

@@ -137,7 +137,20 @@ class BetaParam(Param):
         return text
 
 
+PAPER_BETA = r"\beta(t) = B_0\,\big(1+\varepsilon\,\sin(\omega t)\big)"
+
+
 class ChargedScene(Scene):
+    def shown_equations(self, vals):
+        """The last line is the beta(t) the values choose: the paper's, B0, or the typed expression."""
+        beta = vals["beta"]
+        line = {"paper": PAPER_BETA, "constant": r"\beta(t) = B_0"}.get(beta)
+        return self.equations[:-1] + (line or rf"\beta(t) = {parse(beta).latex()}",)
+
+    def unused(self, vals):
+        """eps and w shape only the paper's beta(t); B0 is not in a typed one."""
+        return {"paper": (), "constant": ("eps", "w")}.get(vals["beta"], ("B0", "eps", "w"))
+
     def pack(self, vals):
         g = GAUGES[vals["gauge"]]
         beta = vals["beta"]
@@ -228,7 +241,7 @@ SCENE = ChargedScene(
                r"E = -\dot\beta(t)\,(x-y,\;x+y)"),
                (r"A^{\prime} = A + \nabla\chi,\quad \phi^{\prime} = \phi - \partial_t\chi,\quad "
                r"G_\chi(q,p,t,p_t) = (q,\,p+e\nabla\chi,\,t,\,p_t+e\,\partial_t\chi)"),
-               r"\beta(t) = B_0\,\big(1+\varepsilon\,\sin(\omega t)\big)"),
+               PAPER_BETA),
     params=(
         Param("m", 1.0, "mass m", (1e-3, 1e3)),
         Param("e", 1.0, "charge e", (-1e3, 1e3)),
