@@ -145,6 +145,25 @@ def test_the_verdict_calls_a_band_bounded_only_when_the_data_show_it():
     assert "bounded" not in text and f"{growth:.2g}× wider in the run's last tenth" in text
 
 
+def test_inside_a_resonance_tongue_the_verdict_compares_h_ext_relative_to_the_growing_h():
+    """The Mathieu tongue case (eps 0.2, alpha 2): the exact solution grows like e^(eps t / 4), so
+    |H| like e^(eps t / 2), e^18 from the run's first tenth to its last, and both methods' |H + p_t|
+    with it. The verdict says by how much |H| grew and gives each method's |H + p_t| relative to the
+    largest |H| so far: both stay far below 1 (each follows the growing solution), RK4's, of higher
+    order, the smaller."""
+    case = next(c for c in SCENES["modulated"].cases if c.name.startswith("Mathieu tongue"))
+    s = Study(scene="modulated", method=case.method, other=case.other, h=case.h, T=case.T, values=case.values)
+    text = html.unescape(common.verdict(s.results))
+    found = re.search(r"\|H\| itself grows ([\d.e+-]+)× over the run .* midpoint's \|H \+ p_t\| reaches "
+                      r"([\d.e+-]+) over the last tenth and rk4's ([\d.e+-]+)\.", text)
+    assert found, text
+    grown, kept, lost = map(float, found.groups())
+    assert math.log(grown) == pytest.approx(case.values["eps"] / 2 * 0.9 * case.T, rel=0.1)
+    assert lost < kept < 1e-2
+    s.values = {"eps": 0.2, "alpha": 2.5}  # just outside: bounded, and no such sentence
+    assert "itself grows" not in common.verdict(s.results)
+
+
 def test_the_verdict_calls_a_band_of_round_off_round_off():
     """gauss6 on charged at h = 0.001: its |H + p_t| is within 10 eps |H| sqrt(N) of its N steps and
     wanders (its last tenth's maximum several times its first tenth's, more than BAND_GROWTH): the

@@ -69,9 +69,8 @@ def verdict(runs):
     band = float(np.nanmax(kept_err))
     # The tenths from the first step: H + p_t is 0 by construction at t = 0, and a run of fewer than
     # 20 records had that 0 as its whole first tenth (a band "5.1e+304× wider" at its end).
-    after = kept_err[1:] if len(kept_err) > 1 else kept_err
-    tenth = max(len(after) // 10, 1)
-    growth = float(np.nanmax(after[-tenth:]) / max(np.nanmax(after[:tenth]), np.finfo(float).tiny))
+    first, last = tenths(kept_err)
+    growth = last / max(first, np.finfo(float).tiny)
     stopped = [e.label for e in (ke, le) if e.failure]
     until = ((f"Up to T = {runs.T:g}" if reached(lr, runs.T) else f"Up to t = {lr.t[-1]:.6g}") if not stopped else
              f"Up to t = {min(kr.t[-1], lr.t[-1]):.6g}, where {html.escape(' and '.join(stopped))} stopped (see the "
@@ -98,14 +97,14 @@ def verdict(runs):
         return (f"<p class='verdict'>{until}, {html.escape(n)}'s |H + p_t| (at most {np.nanmax(drift):.2g}) "
                 f"stays below {what}: at this h and T {smaller}. "
                 "Nothing bounds it over longer runs; whether it leaves the band there depends on the scene (the "
-                f"Long run tab measures it).{phase_note(ke, le, bounded)}</p>")
+                f"Long run tab measures it).{relative_note(ke, le, bounded)}{phase_note(ke, le, bounded)}</p>")
     end = float(np.nanmax(drift[-max(len(drift) // 10, 1):]))  # not its last value: |H + p_t| oscillates
     return (f"<p class='verdict'>{html.escape(n)}'s |H + p_t| leaves {what} at t ≈ {lr.t[above[0]]:.3g} and ends "
             f"{end / band:.3g}× above it (its maximum over the run's last tenth, to t = {lr.t[-1]:g}): "
             + (f"{html.escape(n)}'s is the method's error, {html.escape(p)}'s its steps' rounding." if rounding else f"{html.escape(n)} drifts, {html.escape(p)} does not." if bounded else
                f"{html.escape(n)} drifts faster than {html.escape(p)}.")
             + (f" {html.escape(p)}'s run stopped at t = {kr.t[-1]:.6g} (see the message): its band is measured up to "
-               "there." if ke.failure else "") + f"{phase_note(ke, le, bounded)}</p>")
+               "there." if ke.failure else "") + f"{relative_note(ke, le, bounded)}{phase_note(ke, le, bounded)}</p>")
 
 
 def order(entry):
@@ -119,6 +118,33 @@ def within_roundoff(run):
     rule of work-precision's `at_roundoff`); never where |H| overflowed."""
     bound = roundoff_bound(float(np.nanmax(np.abs(run.H[:, 0]))), max(run.steps, 1))
     return bool(np.isfinite(bound) and np.nanmax(np.abs(run.H_ext[:, 0])) <= bound)
+
+
+def tenths(x):
+    """The maxima of x over its first and its last tenth (from its second record: the first is t = 0)."""
+    after = x[1:] if len(x) > 1 else x
+    tenth = max(len(after) // 10, 1)
+    return float(np.nanmax(after[:tenth])), float(np.nanmax(after[-tenth:]))
+
+
+def relative_note(kept, lost, bounded):
+    """Where |H| itself grows over the run (a parametric resonance: the exact solution grows, and both
+    methods' |H + p_t| with it), a sentence comparing |H + p_t| relative to the largest |H| so far:
+    the absolute bands then say little."""
+    if bounded:
+        return ""
+    first, last = tenths(np.abs(kept.comparison.run.H[:, 0]))
+    if not last > BAND_GROWTH * first:
+        return ""
+    ends = []
+    for e in (kept, lost):
+        run = e.comparison.run
+        scale = np.fmax.accumulate(np.abs(run.H[:, 0]))
+        ends.append(tenths(np.abs(run.H_ext[:, 0]) / np.where(scale > 0, scale, np.inf))[1])
+    p, n = (html.escape(e.label) for e in (kept, lost))
+    return (f" |H| itself grows {last / first:.2g}× over the run (the exact solution grows too), so the absolute "
+            f"bands say little: relative to the largest |H| so far, {p}'s |H + p_t| reaches {ends[0]:.2g} over "
+            f"the last tenth and {n}'s {ends[1]:.2g}.")
 
 
 def phase_note(kept, lost, bounded):
