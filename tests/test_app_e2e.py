@@ -15,7 +15,7 @@ import pytest
 from playwright.sync_api import expect
 from served import ARTIFACTS, CHROMIUM, SERVER_LOG, START_TIMEOUT_S, TABLE_JS, TABLE_ROW, WAIT_MS, query
 
-from app.features.stabilitymap import significant
+from app.features.stabilitymap import MEASURE_TITLES, significant
 from app.page import SPARE_READY
 from cosymp.scenes import SCENES, first, lead
 
@@ -349,7 +349,7 @@ def test_stability_map_shows_the_mathieu_tongue_and_a_click_opens_the_cell(page)
     principal tongue, opens that run in the Orbits view with those values."""
     page.open(query(scene="modulated", view="map"))  # computed by the tab's first showing, or recalled
     page.page.locator("b.wpstatus").filter(has_text=re.compile("done in|by this server")).wait_for(timeout=120_000)
-    title = "growth of midpoint on modulated"
+    title = f"{MEASURE_TITLES['growth']} of midpoint on modulated"
     page.page.wait_for_function(f"() => ({MAP_PIXEL_JS})([{title!r}, 2.0, 0.6]) !== null")
     page.page.wait_for_timeout(1000)
     page.shot("12-stability-map")

@@ -163,7 +163,7 @@ def test_in_the_browser_kapitza_s_map_colours_the_falling_pendulum_apart_from_th
     case = first(SCENES["kapitza"])
     page.open(query(scene="kapitza", method=case.method, vs=case.other, h=case.h, T=case.T, view="map"))
     page.page.locator("b.wpstatus").filter(has_text=re.compile("done in|by this server")).wait_for(timeout=120_000)
-    title = f"growth of {case.method} on kapitza"
+    title = f"{maps.MEASURE_TITLES['growth']} of {case.method} on kapitza"
     page.page.wait_for_function(f"() => ({CELL_COLOURS_JS})({json.dumps(title)})", timeout=60_000)
     cells = page.page.evaluate(CELL_COLOURS_JS, title)
     entry, nu, a = (np.array(cells[k]) for k in ("entry", "x", "y"))

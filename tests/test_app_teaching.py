@@ -11,6 +11,7 @@ from playwright.sync_api import TimeoutError as PlaywrightTimeout
 from playwright.sync_api import expect
 from served import CHROMIUM, START_TIMEOUT_S, TABLE_JS, TABLE_ROW, query
 
+from app.features.stabilitymap import MEASURE_TITLES
 from app.presets import PRESETS
 from cosymp.report.style import METHOD_COLORS
 from cosymp.scenes import lead
@@ -222,7 +223,7 @@ def test_12_the_damped_map_shows_the_energy_error_on_a_sequential_log_scale(page
     page.open(query(scene="damped", view="map"))
     page.page.locator("b.wpstatus").filter(has_text=re.compile("done in|by this server")).wait_for(timeout=120_000)
     # The status and the redrawn map reach the page in separate messages: wait for the map itself.
-    heat = wait_for_plot(page, "H_ext_max_abs of midpoint on damped", lines=0)
+    heat = wait_for_plot(page, f"{MEASURE_TITLES['H_ext_max_abs']} of midpoint on damped", lines=0)
     assert heat["y_mapper"] == "LogColorMapper"
     page.check()
 

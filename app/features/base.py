@@ -50,7 +50,8 @@ class ShownWidget:
         value = getattr(self.obj, self.name)
         state = {"value": list(value) if isinstance(value, list) else value}
         if self.selector:
-            state["options"] = list(self.obj.param[self.name].objects)
+            p = self.obj.param[self.name]
+            state["options"] = dict(p.names) if p.names else list(p.objects)  # shown by their labels
         return state
 
     def _write(self, event):

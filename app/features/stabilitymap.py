@@ -36,6 +36,9 @@ MAP_MAX_SIDE = 100
 SCHEDULER_ENV = "COSYMP_DASK_SCHEDULER"
 MAP_MAX_STEPS = 200_000_000
 LOG_MEASURES = ("H_ext_max_abs", "det_max_dev", "error_final")
+# What the page calls each measure (the command line's names are in the map's text)
+MEASURE_TITLES = {"growth": "growth, ln σmax / T", "H_ext_max_abs": "max |H + p_t|",
+                  "det_max_dev": "max |det M − 1|", "error_final": "relative error at T"}
 HEIGHT = 480
 SIGNIFICANT = 4  # a cell opened in Orbits carries its values to this many significant digits
 
@@ -95,7 +98,8 @@ class StabilityMap(Job):
     computation's thread. A cell can be opened in the Orbits view (`open_cell`)."""
 
     study = param.Parameter(doc="The sidebar's study.")
-    measure = param.Selector(default="growth", objects=list(sweep.MEASURES), doc="What each cell shows.")
+    measure = param.Selector(default="growth", objects={MEASURE_TITLES[k]: k for k in sweep.MEASURES},
+                             doc="What each cell shows.")
     x = param.Selector(default="h", objects=["h"], label="x axis")
     x_start = param.Number(default=0.05, label="from")
     x_stop = param.Number(default=3.0, label="to")
@@ -172,7 +176,7 @@ class StabilityMap(Job):
     def _describe(self, plan):
         (ax, ay) = plan.axes
         shared = ", ".join(f"{k} = {value_text(v)}" for k, v in shared_values(plan).items())
-        return (f"{plan.measures[0]} of {plan.method} on {plan.scene}: {ax.name} {ax.values[0]:g}…{ax.values[-1]:g} "
+        return (f"{MEASURE_TITLES[plan.measures[0]]} of {plan.method} on {plan.scene}: {ax.name} {ax.values[0]:g}…{ax.values[-1]:g} "
                 f"× {ay.name} {ay.values[0]:g}…{ay.values[-1]:g}, {plan.size} cells, each with {shared}")
 
     def _started(self, plan):
@@ -308,19 +312,20 @@ class MapPlot:
         below = key == "growth" and scale is not None and z.max() <= scale[0]
         self.source.selected.indices = []
         self.source.data = data
-        self.fig.title.text = f"{key} of {plan.method} on {plan.scene}" + (
+        self.fig.title.text = f"{MEASURE_TITLES[key]} of {plan.method} on {plan.scene}" + (
             f": at most one e-fold over T in every cell (growth ≤ 1/T = {scale[0]:g})" if below else "")
         self.fig.xaxis.axis_label, self.fig.yaxis.axis_label = ax.name, ay.name
-        self.bar.title = f"{key} (≤ 1/T: lowest colour)" if key == "growth" else key
+        self.bar.title = "growth (≤ 1/T: lowest colour)" if key == "growth" else MEASURE_TITLES[key]
 
 
 MAP_TEXT = ("<p>One measure of the sidebar's method over a grid of two varied quantities (scene parameters, h, T "
             "or θ), every other value taken from the sidebar. Each cell is one run from the scene's initial "
-            "state: <b>growth</b> is ln σ<sub>max</sub> of the product of the method's one-step maps, over T (a "
+            "state (the command line names the measures growth, H_ext_max_abs, det_max_dev and error_final): "
+            "<b>growth</b> is ln σ<sub>max</sub> of the product of the method's one-step maps, over T (a "
             "finite-time Lyapunov exponent of the method: 0 where its map stays bounded, the Floquet exponent "
             "inside a parametric-resonance tongue, ln|R(ih)|/h for RK4 beyond its stability limit); "
-            "<b>H_ext_max_abs</b> the largest |H~| = |H + p_t| over the run; <b>det_max_dev</b> the largest "
-            "|det M<sub>k</sub> − 1| of the one-step maps; <b>error_final</b> the relative error at T against the "
+            "<b>max |H + p_t|</b> the largest |H~| = |H + p_t| over the run; <b>max |det M − 1|</b> the largest "
+            "|det M<sub>k</sub> − 1| of the one-step maps; <b>relative error at T</b> the error at T relative to the "
             "exact flow or a fine RK8 run. Colours are on a log scale: growth's from 1/T, one e-fold of "
             "σ<sub>max</sub> over the run (at or below it, the lowest colour), the others' from their smallest "
             "value. Black cells: the run failed (the line below the map says why). The same grid runs "
