@@ -90,8 +90,8 @@ def drift(P, t0, tau, z):
 SCENE = Scene(
     name="damped",
     title="Damped oscillator (Caldirola-Kanai, as printed)",
-    summary="H = e^(γt) p²/(2m) + e^(−γt) m ω₀ q²/2, the paper's Sec. 4.1 with its parameters. As printed "
-            "it gives q″ − γ q′ + ω₀ q = 0.",
+    summary="H = e^(γt) p²/(2m) + e^(−γt) m ω₀ q²/2, the paper's Sec. 4.1, whose figures take γ = 0.2, h = 0.1, "
+            "T = 50 (the scene's defaults). As printed it gives q″ − γ q′ + ω₀ q = 0.",
     look_for="With the paper's sign, γ > 0 makes q grow like e^(γt/2) while p decays like e^(−γt/2); γ < 0 is "
              "the usual damping of q. H + p_t oscillates boundedly for the structure-preserving methods and drifts "
              "for RK4 over long runs.",
