@@ -32,6 +32,7 @@ from .jobs import Job, Note
 from .plotting import equation, note, push
 from .presets import HARD, PAPER, PRESETS, URL_NAMES, first_state, rounded
 from .warmup import first_view
+from .widgets import bound, empty
 
 LIVE_MAX_STEPS = 2_000_000
 # A comparison expected to take at most this long is computed in the change's handler: its results
@@ -451,8 +452,9 @@ class Controls(pn.viewable.Viewer):
             pn.widgets.Select.from_param(s.param.method, name="Method", **wide),
             pn.widgets.FloatSlider.from_param(s.param.theta, visible=takes_theta, **wide),
             pn.widgets.Select.from_param(s.param.other, **wide),
-            pn.Row(pn.widgets.FloatInput.from_param(s.param.h, name="Step h", format="0.[000000]", **wide),
-                   pn.widgets.FloatInput.from_param(s.param.T, name="Horizon T", **wide), **wide),
+            pn.Row(bound(pn.widgets.FloatInput, s, "h", label="Step h", description=s.param.h.doc, format="0.[000000]",
+                         **wide),
+                   bound(pn.widgets.FloatInput, s, "T", label="Horizon T", description=s.param.T.doc, **wide), **wide),
             note("<h4>Scene parameters</h4>", margin=(10, 5, 0, 5)),
             SceneControls(study=s),
             **wide,
@@ -486,7 +488,7 @@ class SceneControls(pn.viewable.Viewer):
                 k = kind(inputs_class(key).param[p.name])
                 if k not in kinds[i]:
                     kinds[i].append(k)
-        self.pool = [{k: k() for k in kinds[i]} for i in range(len(kinds))]
+        self.pool = [{k: k(self.study.say) for k in kinds[i]} for i in range(len(kinds))]
         self._glossary = note("", margin=(0, 5))
         self._column = pn.Column(*[c.layout for at in self.pool for c in at.values()], self._glossary,
                                  sizing_mode="stretch_width", margin=0)
@@ -534,7 +536,8 @@ def glossary(inputs, names):
 class Control:
     """One pooled control: bound to a parameter of a scene's inputs (and shown), or unbound."""
 
-    def __init__(self, layout, labelled, widgets):
+    def __init__(self, layout, labelled, widgets, say):
+        self.say = say  # the study's: a message for the page
         self.layout = layout
         self.labelled = labelled  # the widget carrying the label
         self.widgets = widgets
@@ -578,16 +581,23 @@ class NumberControl(Control):
     registry whose entry refers back to the widget, so every one stays alive, and with it the
     inputs it shows, the Study watching them and the closed session's results."""
 
-    def __init__(self):
+    def __init__(self, say):
         self.slider = pn.widgets.FloatSlider(start=0.0, end=1.0, value=0.0, format="0.[00000]",
                                              sizing_mode="stretch_width")
         # No start or end on the box: a typed value outside the scene's bounds must reach the
         # study, which says what is wrong and puts the last good value back.
         self.box = pn.widgets.FloatInput(label="", format="0.[00000]", width=100, align="end")
         super().__init__(pn.Row(self.slider, self.box, sizing_mode="stretch_width", margin=0), self.slider,
-                         (self.slider, self.box))
+                         (self.slider, self.box), say)
         self.slider.param.watch(lambda e: self.take(e.new), "value")
-        self.box.param.watch(lambda e: self.take(e.new), "value")
+        self.box.param.watch(self._typed, "value")
+
+    def _typed(self, event):
+        if event.new is None and self.name is not None:  # emptied: the value in use back, and why
+            self.box.value = getattr(self.inputs, self.name)
+            self.say(empty(self.name))
+        else:
+            self.take(event.new)
 
     def show(self, inputs, name):
         v = getattr(inputs, name)  # not the event's value: a refused one has been put back meanwhile
@@ -602,10 +612,10 @@ class NumberControl(Control):
 
 
 class TextControl(Control):
-    def __init__(self):
+    def __init__(self, say):
         self.widget = pn.widgets.TextInput(sizing_mode="stretch_width",
                                            placeholder="e.g. 0.05*(1 + tanh(t)), then Enter")
-        super().__init__(self.widget, self.widget, (self.widget,))
+        super().__init__(self.widget, self.widget, (self.widget,), say)
         self.widget.param.watch(lambda e: self.take(e.new), "value")
 
     def show(self, inputs, name):
@@ -614,9 +624,9 @@ class TextControl(Control):
 
 
 class ChoiceControl(Control):
-    def __init__(self):
+    def __init__(self, say):
         self.widget = pn.widgets.Select(sizing_mode="stretch_width")
-        super().__init__(self.widget, self.widget, (self.widget,))
+        super().__init__(self.widget, self.widget, (self.widget,), say)
         self.widget.param.watch(lambda e: self.take(e.new), "value")
 
     def show(self, inputs, name):

@@ -11,6 +11,7 @@ import weakref
 from urllib.parse import parse_qsl, urlsplit
 
 import numpy as np
+import panel as pn
 import param
 import pytest
 
@@ -390,6 +391,28 @@ def test_an_out_of_range_typed_value_is_refused_and_the_box_shows_the_last_good_
     assert s.message.level == "error" and "gamma" in s.message.text and "outside [-10, 10]" in s.message.text
     assert (s.inputs.gamma, box.value, slider.value) == (0.2, 0.2, 0.2) and s.values == {}
     assert s.results is good
+
+
+def test_an_emptied_number_box_gets_the_value_in_use_back_and_says_what_to_do():
+    """BokehJS sends null for a number box emptied and left with Enter: the sidebar's h raised a
+    ValueError in the server's log (a parameter that takes numbers only) and the page heard nothing.
+    Every number box (the sidebar's h and T, a scene parameter's, a tab's) now shows the value in
+    use again and says the box is empty; the results stay."""
+    s = Study(scene="damped")
+    good = s.results
+    boxes = {w.label: w for w in study.Controls(study=s).__panel__().select(pn.widgets.FloatInput)}
+    lr = longrun.LongRun(s)
+    boxes.update({w.label: w for w in drawn(longrun.LongRunView(s, lr)).__panel__().select(pn.widgets.FloatInput)})
+    gamma = next(c for c in study.SceneControls(study=s).shown() if c.name == "gamma")
+    boxes["gamma"] = gamma.box
+    for label, owner, name in (("Step h", s, "h"), ("Horizon T", s, "T"), ("gamma", s.inputs, "gamma"),
+                               (lr.param.T_long.label, lr, "T_long")):
+        before = getattr(owner, name)
+        s.message = None
+        boxes[label].value = None
+        assert (getattr(owner, name), boxes[label].value) == (before, before), label
+        assert s.message.level == "error" and s.message.text.startswith(f"{label} is empty: type a number"), label
+    assert s.results is good and gamma.slider.value == s.inputs.gamma
 
 
 def test_discarded_controls_do_not_keep_the_study_alive():

@@ -9,6 +9,7 @@ from cosymp.errors import InputError
 from ..jobs import Job
 from ..memory import MB
 from ..plotting import push
+from ..widgets import ShownWidget
 
 AHEAD_BYTES = 16 * MB  # the largest lease a tab's computation takes ahead of its first showing (Follower.ahead)
 
@@ -21,57 +22,6 @@ class Feature:
     state: object = None
     url: dict = field(default_factory=dict)
     ahead: bool = True  # its tab is built ahead of its first showing, in the page's idle time
-
-
-class ShownWidget:
-    """A widget for the parameter `name` of `obj` that writes what the user sets into it at once but
-    follows the parameter (its value, and its choices for a selector) only while `visible()`; one
-    whose parameter changed meanwhile (`stale`) catches up when its tab is shown (`sync`). Made with `from_param`, a hidden tab's widgets
-    followed every scene change: each change is a message to the page and a render there (BokehJS
-    renders a MultiChoice anew, Choices.js, for each change of its options or value: 78 ms a scene
-    change for Work–precision's two; the Stability map's eleven axis controls were 12% of the server's
-    answer to a scene change)."""
-
-    def __init__(self, cls, obj, name, visible, **options):
-        self.obj, self.name, self.visible = obj, name, visible
-        self.selector = isinstance(obj.param[name], param.Selector)
-        bounds = getattr(obj.param[name], "bounds", None)
-        if bounds is not None:
-            options = {"start": bounds[0], "end": bounds[1], **options}
-        self.widget = cls(label=obj.param[name].label, **self._state(), **options)
-        self._syncing = False
-        self.stale = False  # the parameter changed while the tab was hidden
-        self.widget.param.watch(self._write, "value")
-        obj.param.watch(self._follow, name)
-        if self.selector:
-            obj.param.watch(self._follow, name, what="objects")
-
-    def _state(self):
-        value = getattr(self.obj, self.name)
-        state = {"value": list(value) if isinstance(value, list) else value}
-        if self.selector:
-            p = self.obj.param[self.name]
-            state["options"] = dict(p.names) if p.names else list(p.objects)  # shown by their labels
-        return state
-
-    def _write(self, event):
-        if not self._syncing:
-            setattr(self.obj, self.name, list(event.new) if isinstance(event.new, list) else event.new)
-
-    def _follow(self, *events):
-        if self.visible():
-            push(self.sync)
-        else:
-            self.stale = True
-
-    def sync(self):
-        """The widget set to the parameter's value and choices (a select the parameter's new choices
-        leave without its value, set by the widget to the first one meanwhile, writes nothing back)."""
-        self._syncing, self.stale = True, False
-        try:
-            self.widget.param.update(**self._state())
-        finally:
-            self._syncing = False
 
 
 class FeatureView(pn.viewable.Viewer):

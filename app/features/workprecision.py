@@ -585,13 +585,14 @@ class WorkPrecisionView(FeatureView):
         self.follow(lh, "rows", "capped")
         return pn.Column(
             note(WP_TEXT.format(steps=f"{WP_MAX_STEPS:,}")),
-            pn.Row(choices[0], pn.widgets.FloatInput.from_param(m.param.T, width=140), **wide),
+            pn.Row(choices[0], self.widget(pn.widgets.FloatInput, m, "T", description=m.param.T.doc, width=140), **wide),
             pn.widgets.Checkbox.from_param(m.param.peers),
             wp_row, wp_status, self.wp_failed, self.wp_hint, self.wp_box,
             rule(),
             note(LONG_TEXT),
             pn.Row(choices[1],
-                   pn.widgets.FloatInput.from_param(lh.param.h, format="0.[000000]", width=140),
+                   self.widget(pn.widgets.FloatInput, lh, "h", description=lh.param.h.doc, format="0.[000000]",
+                               width=140),
                    pn.widgets.Select.from_param(lh.param.T_max, width=140), **wide),
             long_row, long_status, self.long_capped, self.long_failed, self.long_box,
             **wide)
