@@ -19,8 +19,8 @@ def bound(cls, obj, name, **options):
 class ShownWidget:
     """A widget for the parameter `name` of `obj` that writes what the user sets into it at once but
     follows the parameter (its value, and its choices for a selector) only while `visible()`; one
-    whose parameter changed meanwhile (`stale`) catches up when its tab is shown (`sync`). Made with `from_param`, a hidden tab's widgets
-    followed every scene change: each change is a message to the page and a render there (BokehJS
+    whose parameter changed meanwhile (`stale`) catches up when its tab is shown (`sync`). Made with
+    `from_param`, a hidden tab's widgets followed every scene change: each change is a message to the page and a render there (BokehJS
     renders a MultiChoice anew, Choices.js, for each change of its options or value: 78 ms a scene
     change for Work–precision's two; the Stability map's eleven axis controls were 12% of the server's
     answer to a scene change)."""

@@ -262,7 +262,8 @@ class LongRunView(FeatureView):
             note("<p>The study's scene, methods, parameters and h, run to the long horizon in chunks off the "
                  "event loop. The plots show per-bin envelopes (each bin's min and max, or max) as they "
                  "arrive; the page stays usable meanwhile.</p>"),
-            pn.Row(self.widget(pn.widgets.FloatInput, lr, "T_long", description=lr.param.T_long.doc, width=180), start, cancel, progress),
+            pn.Row(self.widget(pn.widgets.FloatInput, lr, "T_long", description=lr.param.T_long.doc, width=180),
+                   start, cancel, progress),
             note(status), self.since, self.key,
             grid(*[c.panel for c in self.plots.values()]),
             sizing_mode="stretch_width")

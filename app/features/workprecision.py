@@ -585,7 +585,8 @@ class WorkPrecisionView(FeatureView):
         self.follow(lh, "rows", "capped")
         return pn.Column(
             note(WP_TEXT.format(steps=f"{WP_MAX_STEPS:,}")),
-            pn.Row(choices[0], self.widget(pn.widgets.FloatInput, m, "T", description=m.param.T.doc, width=140), **wide),
+            pn.Row(choices[0], self.widget(pn.widgets.FloatInput, m, "T", description=m.param.T.doc, width=140),
+                   **wide),
             pn.widgets.Checkbox.from_param(m.param.peers),
             wp_row, wp_status, self.wp_failed, self.wp_hint, self.wp_box,
             rule(),
