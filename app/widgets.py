@@ -20,10 +20,12 @@ class ShownWidget:
     """A widget for the parameter `name` of `obj` that writes what the user sets into it at once but
     follows the parameter (its value, and its choices for a selector) only while `visible()`; one
     whose parameter changed meanwhile (`stale`) catches up when its tab is shown (`sync`). Made with
-    `from_param`, a hidden tab's widgets followed every scene change: each change is a message to the page and a render there (BokehJS
-    renders a MultiChoice anew, Choices.js, for each change of its options or value: 78 ms a scene
-    change for Work–precision's two; the Stability map's eleven axis controls were 12% of the server's
-    answer to a scene change)."""
+    `from_param`, a hidden tab's widgets followed every scene change: each change is a message to
+    the page and a render there (BokehJS renders a MultiChoice anew, Choices.js, for each change of
+    its options or value: 78 ms a scene change for Work–precision's two; the Stability map's eleven
+    axis controls were 12% of the server's answer to a scene change). `from_param` also let an
+    emptied number box write None into a parameter that takes numbers only (a ValueError in the
+    server's log, nothing on the page)."""
 
     def __init__(self, cls, obj, name, visible, **options):
         self.obj, self.name, self.visible = obj, name, visible
