@@ -9,8 +9,10 @@ import shlex
 import numpy as np
 import panel as pn
 import param
+from bokeh.events import Tap
 from bokeh.models import (
     ColorBar,
+    CustomJS,
     CustomJSTickFormatter,
     HoverTool,
     LogColorMapper,
@@ -277,6 +279,15 @@ def colour_range(plan, z):
     return low, high if high > low else 10.0 * low
 
 
+# BokehJS 3's HoverToolView._move_exit, once the tap has been handled: the tooltip hidden and the
+# mouse's last position forgotten, as when the mouse leaves the plot (`_clear` alone hides it, but the
+# plot's next repaint, its tab shown again, inspects that position anew)
+CLEAR_TOOLTIP = """setTimeout(() => {
+  const view = Bokeh.index.find_one(hover);
+  if (view != null && typeof view._move_exit === "function") view._move_exit();
+}, 0);"""
+
+
 class MapPlot:
     """The heat map for one pair of axis kinds (linear or log): quads coloured by the measure on a
     log scale (`colour_range`), a colour bar, hover, and a click that calls on_tap(i, j)."""
@@ -292,8 +303,10 @@ class MapPlot:
         self.bar = ColorBar(color_mapper=self.mapper, width=12, title_standoff=6,
                             formatter=CustomJSTickFormatter(code=LOG_TICKS))
         self.fig.add_layout(self.bar, "right")
-        self.fig.add_tools(HoverTool(renderers=[quads], tooltips=[("x", "@x{0.[0000]}"), ("y", "@y{0.[0000]}"),
-                                                                  ("value", "@z")]), TapTool(renderers=[quads]))
+        hover = HoverTool(renderers=[quads], tooltips=[("x", "@x{0.[0000]}"), ("y", "@y{0.[0000]}"), ("value", "@z")])
+        self.fig.add_tools(hover, TapTool(renderers=[quads]))
+        # A click opens the Orbits tab: the cell's tooltip stayed on the map, and was there on coming back.
+        self.fig.js_on_event(Tap, CustomJS(args={"hover": hover}, code=CLEAR_TOOLTIP))
         self.source.selected.on_change("indices", lambda attr, old, new: new and on_tap(
             int(self.source.data["i"][new[0]]), int(self.source.data["j"][new[0]])))
         self.pane = pane(self.fig, min_height=HEIGHT + 10)
