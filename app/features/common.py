@@ -42,6 +42,7 @@ def color_key(runs):
 
 
 BAND_GROWTH = 2.0
+RESOLVED = 0.1  # a relative |H + p_t| from which a method no longer follows a growing solution's energy
 
 
 def verdict(runs):
@@ -52,7 +53,8 @@ def verdict(runs):
     its first tenth (an adiabatic change of the scene can widen it). A band within round-off of its
     N steps (`within_roundoff`) is called round-off, not wider: rounding accumulates over the steps
     (gauss6 on charged at h = 0.001: 2.3e-14, its last tenth's maximum 9.8 times its first tenth's);
-    where both methods' are, the verdict says that neither method's own error shows."""
+    where both methods' are, the verdict says that neither method's own error shows. Where the band
+    grows and |H| with it, the exact solution grows: `growing_verdict` compares relative errors."""
     kept, lost = {}, {}
     for e in runs.entries if runs is not None else ():
         if e.comparison is None:
@@ -77,6 +79,10 @@ def verdict(runs):
              "message)")
     rounding = within_roundoff(kr)
     bounded = growth <= BAND_GROWTH or rounding
+    if not bounded:
+        h_first, h_last = tenths(np.abs(kr.H[:, 0]))
+        if h_last > BAND_GROWTH * h_first:
+            return growing_verdict(until, ke, le, h_last / h_first)
     what = (f"{html.escape(p)}'s band ({band:.2g}, round-off: within {ROUNDOFF:g} ε |H| √N of its {kr.steps} "
             "steps)" if rounding else
             f"{html.escape(p)}'s bounded band ({band:.2g})" if bounded else
@@ -97,14 +103,14 @@ def verdict(runs):
         return (f"<p class='verdict'>{until}, {html.escape(n)}'s |H + p_t| (at most {np.nanmax(drift):.2g}) "
                 f"stays below {what}: at this h and T {smaller}. "
                 "Nothing bounds it over longer runs; whether it leaves the band there depends on the scene (the "
-                f"Long run tab measures it).{relative_note(ke, le, bounded)}{phase_note(ke, le, bounded)}</p>")
+                f"Long run tab measures it).{phase_note(ke, le, bounded)}</p>")
     end = float(np.nanmax(drift[-max(len(drift) // 10, 1):]))  # not its last value: |H + p_t| oscillates
     return (f"<p class='verdict'>{html.escape(n)}'s |H + p_t| leaves {what} at t ≈ {lr.t[above[0]]:.3g} and ends "
             f"{end / band:.3g}× above it (its maximum over the run's last tenth, to t = {lr.t[-1]:g}): "
             + (f"{html.escape(n)}'s is the method's error, {html.escape(p)}'s its steps' rounding." if rounding else f"{html.escape(n)} drifts, {html.escape(p)} does not." if bounded else
                f"{html.escape(n)} drifts faster than {html.escape(p)}.")
             + (f" {html.escape(p)}'s run stopped at t = {kr.t[-1]:.6g} (see the message): its band is measured up to "
-               "there." if ke.failure else "") + f"{relative_note(ke, le, bounded)}{phase_note(ke, le, bounded)}</p>")
+               "there." if ke.failure else "") + f"{phase_note(ke, le, bounded)}</p>")
 
 
 def order(entry):
@@ -127,24 +133,30 @@ def tenths(x):
     return float(np.nanmax(after[:tenth])), float(np.nanmax(after[-tenth:]))
 
 
-def relative_note(kept, lost, bounded):
-    """Where |H| itself grows over the run (a parametric resonance: the exact solution grows, and both
-    methods' |H + p_t| with it), a sentence comparing |H + p_t| relative to the largest |H| so far:
-    the absolute bands then say little."""
-    if bounded:
-        return ""
-    first, last = tenths(np.abs(kept.comparison.run.H[:, 0]))
-    if not last > BAND_GROWTH * first:
-        return ""
+def growing_verdict(until, kept, lost, grown):
+    """The verdict where |H| itself grows over the run (a parametric resonance, a field that grows:
+    the exact solution grows, and both methods' |H + p_t| with it, so neither error is a band): each
+    method's |H + p_t| relative to the largest |H| so far, over the run's last tenth. A method whose
+    relative error reaches RESOLVED no longer follows the solution's energy; where one does, the two
+    are not ranked (an absolute 'drifts faster' ranked a method 100 % wrong above one 2 % wrong)."""
     ends = []
     for e in (kept, lost):
         run = e.comparison.run
         scale = np.fmax.accumulate(np.abs(run.H[:, 0]))
         ends.append(tenths(np.abs(run.H_ext[:, 0]) / np.where(scale > 0, scale, np.inf))[1])
     p, n = (html.escape(e.label) for e in (kept, lost))
-    return (f" |H| itself grows {last / first:.2g}× over the run (the exact solution grows too), so the absolute "
-            f"bands say little: relative to the largest |H| so far, {p}'s |H + p_t| reaches {ends[0]:.2g} over "
-            f"the last tenth and {n}'s {ends[1]:.2g}.")
+    text = (f"<p class='verdict'>{until}, |H| itself grows {grown:.2g}× (the exact solution grows too), and both "
+            "methods' |H + p_t| with it: their sizes say little. Relative to the largest |H| so far, "
+            f"{p}'s |H + p_t| reaches {ends[0]:.2g} over the run's last tenth and {n}'s {ends[1]:.2g}: ")
+    off = [name for name, end in zip((p, n), ends) if end >= RESOLVED]
+    if len(off) == 2:
+        text += "neither method follows the solution's energy at this h; reduce h before comparing them."
+    elif off:
+        text += f"{off[0]} no longer follows the solution's energy at this h, {n if off[0] == p else p} does."
+    else:
+        text += f"both follow the growing solution, {p if ends[0] <= ends[1] else n} the more closely."
+    return text + (f" {p}'s run stopped at t = {kept.comparison.run.t[-1]:.6g} (see the message)." if kept.failure
+                   else "") + f"{phase_note(kept, lost, False)}</p>"
 
 
 def phase_note(kept, lost, bounded):
