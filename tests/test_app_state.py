@@ -924,6 +924,13 @@ def test_a_long_run_says_when_the_sidebar_asks_for_another_run_than_the_one_show
     assert lr.since() == "", "asked for the run shown again"
     lr.T_long = 1e9
     assert "refused" in lr.since() and "cap" in view.since.object, "a run it would refuse is said, with why"
+    lr.T_long = 2000.0
+    lr.running = True  # as while a run goes on: a horizon typed then is not the one it runs
+    lr.T_long = 3000.0
+    assert "T = 3000" in lr.since() and "cancel this run, then press Start" in view.since.object
+    lr.running = False
+    lr.request()  # asked for: it runs next, nothing to say meanwhile
+    assert lr.since() == "" and lr.data and "T = 3000" in lr.setting
 
 
 def test_long_run_refuses_a_horizon_over_the_cap():

@@ -112,8 +112,9 @@ class LongRun(Job):
         """'' while the sidebar and the horizon ask for the run shown (or none is shown), else a
         sentence saying what they ask for now (`describe`), or why a long run of it is refused: a long
         run starts on Start long run, a first visit or another scene, not on every change of the
-        sidebar."""
-        if not self.data or self.running or self._ran is None:
+        sidebar. A run under way says so too (a horizon typed during it is not what it runs); from a
+        request to the run's start (`_ran` None) there is nothing to say: what is asked for runs next."""
+        if not self.data or self._ran is None:
             return ""
         try:
             inputs = self._inputs()
@@ -121,7 +122,12 @@ class LongRun(Job):
             return f"the sidebar now asks for a long run that is refused: {err}"
         if self._key(inputs) == self._ran:
             return ""
-        return f"now {self.describe(inputs)}: press Start long run to run it"
+        return f"now {self.describe(inputs)}: " + ("cancel this run, then press Start long run to run it"
+                                                    if self.running else "press Start long run to run it")
+
+    def request(self):
+        self._ran = None
+        super().request()
 
     def _started(self, inputs):
         self._said = set()
