@@ -138,6 +138,7 @@ def test_the_heat_map_taps_to_the_cell_under_the_click_and_marks_failures(tongue
     opened = []
     plot = maps.MapPlot(False, False, lambda i, j: opened.append((i, j)))
     plot.set(m.result)
+    assert [name for name, _ in plot.hover.tooltips] == ["alpha", "eps", maps.MEASURE_TITLES["growth"]]
     data = plot.source.data
     assert len(data["z"]) == 45 and np.array_equal(np.sort(data["z"]), np.sort(m.result.values["growth"].ravel()))
     x, y = 2.05, 0.39

@@ -288,6 +288,11 @@ CLEAR_TOOLTIP = """setTimeout(() => {
 }, 0);"""
 
 
+def tooltips(x, y, value):
+    """A cell's hover lines, named as the map's axes and measure."""
+    return [(x, "@x{0.[0000]}"), (y, "@y{0.[0000]}"), (value, "@z")]
+
+
 class MapPlot:
     """The heat map for one pair of axis kinds (linear or log): quads coloured by the measure on a
     log scale (`colour_range`), a colour bar, hover, and a click that calls on_tap(i, j)."""
@@ -303,10 +308,10 @@ class MapPlot:
         self.bar = ColorBar(color_mapper=self.mapper, width=12, title_standoff=6,
                             formatter=CustomJSTickFormatter(code=LOG_TICKS))
         self.fig.add_layout(self.bar, "right")
-        hover = HoverTool(renderers=[quads], tooltips=[("x", "@x{0.[0000]}"), ("y", "@y{0.[0000]}"), ("value", "@z")])
-        self.fig.add_tools(hover, TapTool(renderers=[quads]))
+        self.hover = HoverTool(renderers=[quads], tooltips=tooltips("x", "y", "value"))
+        self.fig.add_tools(self.hover, TapTool(renderers=[quads]))
         # A click opens the Orbits tab: the cell's tooltip stayed on the map, and was there on coming back.
-        self.fig.js_on_event(Tap, CustomJS(args={"hover": hover}, code=CLEAR_TOOLTIP))
+        self.fig.js_on_event(Tap, CustomJS(args={"hover": self.hover}, code=CLEAR_TOOLTIP))
         self.source.selected.on_change("indices", lambda attr, old, new: new and on_tap(
             int(self.source.data["i"][new[0]]), int(self.source.data["j"][new[0]])))
         self.pane = pane(self.fig, min_height=HEIGHT + 10)
@@ -328,6 +333,7 @@ class MapPlot:
         self.fig.title.text = f"{MEASURE_TITLES[key]} of {plan.method} on {plan.scene}" + (
             f": at most one e-fold over T in every cell (growth ≤ 1/T = {scale[0]:g})" if below else "")
         self.fig.xaxis.axis_label, self.fig.yaxis.axis_label = ax.name, ay.name
+        self.hover.tooltips = tooltips(ax.name, ay.name, MEASURE_TITLES[key])
         self.bar.title = "growth (≤ 1/T: lowest colour)" if key == "growth" else MEASURE_TITLES[key]
 
 
