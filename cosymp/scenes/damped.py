@@ -117,6 +117,8 @@ SCENE = Scene(
     time_scale=1.0,
     notes=(("Printed sign kept: the usual Caldirola-Kanai damping has the exponentials the other "
            "way round, i.e. gamma -> -gamma here."),
+           ("Printed stiffness kept: H has w0 where w0^2 is usual, so the undamped angular frequency is "
+            "sqrt(w0) (the same at the paper's w0 = 1)."),
            "Volume-form run in the paper: gamma = 2e-4, T = 5e5."),
     paper=Paper("Section 4.1: damped harmonic oscillator", {"gamma": 0.2}, {"gamma": 2e-4}, 5e5),
     cases=(

@@ -76,7 +76,8 @@ SCENE = Scene(
     cases=(
         Case("Kapitza: RK4 against Gauss at equal order",
              "The pendulum held up by its fast-driven pivot (a 0.1, ν 40) at h 0.01 to T 25, with the "
-             "two-stage Gauss method: symplectic, of order 4 like RK4, at 2 stages a step against its 4. "
+             "two-stage Gauss method: symplectic, of order 4 like RK4, at 2 stages a step against its 4 (implicit "
+             "ones: each step solves for them by Newton, so a step costs more wall time than RK4's). "
              "Look at |H + p_t|: RK4's climbs steadily to nearly three times Gauss's flat band. (The midpoint "
              "rule's band, 0.5 at h 0.005 from the drive, is far above anything RK4 drifts to in a live run.)",
              "gauss4", "rk4", 0.01, 25.0, first=True),
