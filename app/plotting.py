@@ -94,14 +94,18 @@ const pos = ticks.filter((v) => v > 0);
 const crowded = pos.some((v, i) => i > 0 && v / pos[i - 1] < 1.6);  // linear steps inside a decade
 const round = (v) => { const m = v / 10 ** Math.floor(Math.log10(v) + 1e-9); return [1, 2, 5, 10].some((k) => Math.abs(m - k) < 1e-6 * k); };
 if (crowded && pos.filter(round).length >= 2 ? !round(tick) : crowded && pos.indexOf(tick) % 2 === 1) return "";
-if (tick >= 1e-3 && tick < 1e5) return String(parseFloat(tick.toPrecision(3)));
-let [m, e] = tick.toExponential(2).split("e");
+const spread = pos.length > 1 ? pos[pos.length - 1] / pos[0] - 1 : 1;  // a narrow axis needs more digits
+const digits = Math.min(15, Math.max(3, Math.ceil(-Math.log10(spread)) + 2));
+if (tick >= 1e-3 && tick < 1e5) return String(parseFloat(tick.toPrecision(digits)));
+let [m, e] = tick.toExponential(digits - 1).split("e");
 if (m.includes(".")) m = m.replace(/0+$/, "").replace(/\.$/, "");
 return m + "e" + e.replace("+", "");
 """
 """Log-axis tick labels: 1e-5, 2e-17, 0.01, 100; where the ticks step linearly inside a decade
 (2e-16, 3e-16, 4e-16, 5e-16 crowd together), only 1, 2 and 5 times a power of ten are labelled,
-or every other tick where that leaves fewer than two labels."""
+or every other tick where that leaves fewer than two labels. An axis spanning less than a factor
+of 1.01 gets the digits that tell its ticks apart (1, 1.001, 1.002: three significant digits wrote
+1, 1, 1 on a carried loop's area ratio)."""
 
 
 def figure(title, x_label="t", y_label="", logx=False, logy=False, height=HEIGHT, aspect=False):

@@ -105,6 +105,8 @@ def test_03_tick_labels_are_compact_and_distinct(page):
     assert fmt([0.999997, 0.999998, 0.999999, 1, 1.000001]) == ["1−3e-6", "1−2e-6", "1−1e-6", "1", "1+1e-6"]
     log = page.page.evaluate(f"(ticks) => ({FORMAT_JS})(ticks, 'crowded')", [1e-17, 1e-16, 2e-16, 3e-16, 4e-16, 5e-16])
     assert log == ["1e-17", "1e-16", "2e-16", "", "", "5e-16"], "log ticks inside a decade are thinned to 1, 2, 5"
+    narrow = page.page.evaluate(f"(ticks) => ({FORMAT_JS})(ticks, 'crowded')", [1, 1.0005, 1.001, 1.0015, 1.002])
+    assert narrow == ["1", "", "1.001", "", "1.002"], "a log axis within a factor 1.01 is written with its digits"
     page.check()
 
 
