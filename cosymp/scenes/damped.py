@@ -138,7 +138,7 @@ SCENE = Scene(
              "round-off only for the symplectic scheme.",
              "symplectic-euler", "rk4", 0.1, 50.0, values={"gamma": 2e-4}, view="long", T_long=5e5),
         Case("Damped across 600 decades",
-             "gamma T = 1400: e^{gamma t} reaches 1e608, q 1e304 and p 1e-304. Steps are taken in "
+             "γ T = 1400: e^(γt) reaches 1e608, q 1e304 and p 1e-304. Steps are taken in "
              "scaled coordinates, so both runs reach T, and H + p_t stays bounded.",
              "symplectic-euler", "rk4", 0.1, 7000.0, values={"gamma": 0.2}, hard=True),
         Case("Damped beyond floating point",

@@ -90,7 +90,7 @@ SCENE = Scene(
              "symplectic-euler", "euler", 0.05, 200.0, values={"eps": 0.0}, hard=True),
         Case("Mathieu tongue: parametric resonance",
              "Stiffness 1 + 0.2 sin(2t) is inside the principal tongue: the true solution grows like "
-             "e^{0.05 t}, and both methods grow at that rate (e^10 by T).",
+             "e^(0.05 t), and both methods grow at that rate (e^10 by T).",
              "midpoint", "rk4", 0.05, 200.0, values={"eps": 0.2, "alpha": 2.0}, hard=True),
         Case("Just outside the tongue",
              "The same depth at alpha = 2.5 is stable: the solution beats but stays bounded, and "
