@@ -931,6 +931,10 @@ def test_a_long_run_says_when_the_sidebar_asks_for_another_run_than_the_one_show
     lr.running = False
     lr.request()  # asked for: it runs next, nothing to say meanwhile
     assert lr.since() == "" and lr.data and "T = 3000" in lr.setting
+    lr.T_long = 1e9
+    lr.start()  # refused: the run shown is still T = 3000's, and a later change is said
+    lr.T_long = 4000.0
+    assert "T = 4000" in lr.since() and "T = 3000" in lr.setting
 
 
 def test_long_run_refuses_a_horizon_over_the_cap():

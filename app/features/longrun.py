@@ -78,6 +78,7 @@ class LongRun(Job):
         self._said = set()
         self._steps_done = 0
         self._ran = None  # the key (`_key`) of the run shown
+        self._asked = False  # a run was asked for and has not started: it replaces what is shown
         study.param.watch(self._on_scene, ["scene"])
 
     def _on_scene(self, event):
@@ -113,8 +114,8 @@ class LongRun(Job):
         sentence saying what they ask for now (`describe`), or why a long run of it is refused: a long
         run starts on Start long run, a first visit or another scene, not on every change of the
         sidebar. A run under way says so too (a horizon typed during it is not what it runs); from a
-        request to the run's start (`_ran` None) there is nothing to say: what is asked for runs next."""
-        if not self.data or self._ran is None:
+        request to the run's start there is nothing to say: what is asked for runs next."""
+        if not self.data or self._ran is None or self._asked:
             return ""
         try:
             inputs = self._inputs()
@@ -126,10 +127,18 @@ class LongRun(Job):
                                                     if self.running else "press Start long run to run it")
 
     def request(self):
-        self._ran = None
+        self._asked = True
         super().request()
 
+    def _refused(self):
+        self._asked = False
+
+    def cancel(self):
+        self._asked = False
+        super().cancel()
+
     def _started(self, inputs):
+        self._asked = False
         self._said = set()
         self._steps_done = 0
         self._ran = self._key(inputs)
