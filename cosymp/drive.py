@@ -51,9 +51,8 @@ class Drive:
     continue the run as one call would (the steps are numbered from the run's start); bins and
     the maps' sampling are counted from the run's first step when each call's length is a
     multiple of `unit` (and so are the nearby members' states, which on a linear scene take the
-    step matrix at the mapped steps: kernels.survey._member). Those members' p_t (PT[1:]) is
-    then the step matrix's quadratic form's, as in `simulate`'s ensembles of a linear scene
-    (no figure reads it): a splitting's reads Q off by polarization and carries its round-off.
+    step matrix at the mapped steps: kernels.survey._member). Those members' p_t is then not
+    carried (no figure reads it): PT[1:] is NaN after such an advance().
     """
 
     def __init__(self, setup, h, z0=None, pt0=None, t0=0.0, every=1, width=0, growth=False, energy=True,
@@ -84,6 +83,7 @@ class Drive:
             self.acc[1:] = math.nan
         self.failure = ""
         self.unit = math.lcm(max(1, self.every), max(1, self.width))
+        self._members_by_map = setup.scene.kernel.linear and len(self.Z) > 1 and self.every > 0
 
     @property
     def H_ext_max_abs(self):
@@ -118,6 +118,8 @@ class Drive:
         env[:, 4:] = -math.inf  # stays so in a bin without a sampled map: NaN below
         tb = np.empty(bins)
         status, k, in_tangent = self._call(steps, env, tb, *_no_records(N, m))
+        if self._members_by_map:
+            self.PT[1:] = math.nan
         self.done += k
         self.t = self.t0 + self.done * self.h
         if status != OK:
@@ -156,6 +158,8 @@ class Drive:
         simulate's does."""
         if self.width or self.every not in (0, stride) or self.growth is not None:
             raise ValueError("record() needs a Drive with every = stride (or no maps), no bins and no growth")
+        if self._members_by_map and self.done:
+            raise ValueError("record() cannot continue an advance() of a linear scene's members: their p_t was not carried")
         N, m = self.Z.shape
         K = records(steps, stride)
         if K * N * (m + 1) * (3 if increments else 1) > MAX_RECORDED:

@@ -179,9 +179,16 @@ def test_envelopes_match_numpy_reductions(scene, method):
     for key in ("det", "symp"):
         np.testing.assert_allclose(bins[key], want[key], rtol=1e-8, atol=1e-13)
     np.testing.assert_allclose(Z, tr.z[-1], rtol=0, atol=1e-12 * np.max(np.abs(tr.z)))
-    # the nearby members' p_t: member steps on a nonlinear scene, the step matrix's quadratic form
-    # on a linear one (a run that records nothing), as simulate's ensemble takes them
-    np.testing.assert_allclose(drive.PT[1:], tr.pt[-1, 1:], rtol=0, atol=1e-12 * max(1.0, np.max(np.abs(tr.H))))
+    # the nearby members' p_t: by member steps on a nonlinear scene, as simulate's ensemble takes
+    # them; not carried on a linear one (the members take the step matrix, without its Q)
+    if s.scene.kernel.linear:
+        assert np.all(np.isnan(drive.PT[1:]))
+        bare = Drive(s, h, z0=Z0)
+        bare.advance(2)
+        with pytest.raises(ValueError, match="not carried"):
+            bare.record(1, 1)
+    else:
+        np.testing.assert_allclose(drive.PT[1:], tr.pt[-1, 1:], rtol=0, atol=1e-12 * max(1.0, np.max(np.abs(tr.H))))
 
 
 @pytest.mark.parametrize("scene,method", PAIRS)

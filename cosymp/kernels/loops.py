@@ -179,7 +179,8 @@ def _accept(status, i, z, old, pt, Z, PT, rec, recording, Zrec, PTrec, dZrec, P)
 @njit(**INLINE)
 def apply_matrix(Z, i, M, Q, old, zs, z, P, e, up, down):
     """A linear scene's step on member i: old <- Z[i]; z <- M zs with zs = old in the step's scaled
-    coordinates (exponent e), z left scaled; returns zs.Q zs, p_t's quadratic term."""
+    coordinates (exponent e), z left scaled; returns zs.Q zs, p_t's quadratic term (0 where Q has no
+    rows: M alone, as kernels.linear forms it)."""
     m = 2 * ndof(P)
     quad = 0.0
     for r in range(m):
@@ -191,7 +192,8 @@ def apply_matrix(Z, i, M, Q, old, zs, z, P, e, up, down):
         qr = 0.0
         for c in range(m):
             acc += M[r, c] * zs[c]
-            qr += Q[r, c] * zs[c]
+            if Q.shape[0] > 0:
+                qr += Q[r, c] * zs[c]
         z[r] = acc
         quad += zs[r] * qr
     return quad

@@ -8,11 +8,15 @@ z.Q z/2, whose round-off grows with the spread of Q's entries: the splittings' Q
 polarization, made |H + p_t| of the SRKN11b splitting on damped grow to 5e-3 by gamma t = 40 with
 unscaled steps, and 1000x the member steps' round-off with scaled ones). One exception: in a run
 that records nothing, on a linear scene, at a step whose map is formed, members 1.. take that
-step matrix (_member), as `simulate`'s ensembles of a linear scene do: their p_t enters no figure
-of such a run (H + p_t is member 0's), their states only the volume estimator, and each costs a
-matrix product instead of a step. With the volume estimator's closed form (_volume), the app's
-long run of the paper's damped run (5e6 steps, 4 members, 20,000 bins) went from 99 to 68 ns a
-step with midpoint and from 142 to 100 with rk4 (in-process A/B, min of 5). Member 0's one-step
+step matrix (_member), as `simulate`'s ensembles of a linear scene do, and carry no p_t: their p_t
+enters no figure of such a run (H + p_t is member 0's), their states only the volume estimator,
+and each costs a matrix product instead of a step. With the volume estimator's closed form
+(_volume), the app's long run of the paper's damped run (5e6 steps, 4 members, 20,000 bins) went
+from 99 to 68 ns a step with midpoint and from 142 to 100 with rk4 (in-process A/B, min of 5);
+without the members' p_t (no Q formed, nothing stored for it), with the volume estimator's scratch
+and the current bin's figures on the stack and in local variables (the compiler must assume that a
+store into a heap array changes the others), to 56-58 with midpoint (benchmarks/drive.py --repeats
+7, 2026-12-02). Member 0's one-step
 tangent map M_k (the step matrix on a linear scene, a complex step of the member step
 otherwise, in the step's scaled coordinates as kernels.loops.tangent_matrix and tangent_complex
 give it) feeds the running maxima of |det M_k - 1| and of the symplecticity defect, and the
@@ -57,6 +61,7 @@ from .dispatch import (
     JIT,
     coef,
     energy,
+    is_linear,
     lmatrix,
     lwork,
     ndof,
@@ -285,26 +290,22 @@ def _volume(X, h, P):
     return -d if n % 2 else d
 
 
-def tangent_work(D, P, quad):
+def tangent_work(D, P):
     """Stack scratch of member 0's tangent map (_tangent): on a linear scene the step matrix's
-    work and its Q, with no rows unless `quad` (kernels.linear: M alone)."""
+    work and a Q with no rows (kernels.linear: M alone)."""
 
 
 @overload(tangent_work, jit_options=_IR_INLINE, inline="always")
-def _tangent_work(D, P, quad):
+def _tangent_work(D, P):
     if _scene(P).linear:
-        def linear(D, P, quad):
-            Q = matrices(P, 1, 0.0)[0]
-            return lwork(D, P), (Q if quad else Q[:0])
-        return linear
-    return lambda D, P, quad: (work(D, P, 0j), vectors(P, 1, 0j)[0])
+        return lambda D, P: (lwork(D, P), matrices(P, 1, 0.0)[0][:0])
+    return lambda D, P: (work(D, P, 0j), vectors(P, 1, 0j)[0])
 
 
 def _tangent(D, P, C, tk, h, zs, pt, M, TW):
     """Member 0's one-step tangent map M at the (scaled) state zs: the step matrix on a linear
     scene, a complex step of the member step otherwise (kernels.loops.tangent_matrix and
-    tangent_complex). Returns (status, s): s the step's p_t term of a linear scene that no state
-    enters (kernels.loops.apply_matrix), 0 otherwise."""
+    tangent_complex). Returns the status."""
 
 
 @overload(_tangent, jit_options=_INLINE)
@@ -312,7 +313,8 @@ def _tangent_impl(D, P, C, tk, h, zs, pt, M, TW):
     if _scene(P).linear:
         def matrix(D, P, C, tk, h, zs, pt, M, TW):
             LW, Q = TW
-            return OK, lmatrix(D, P, C, tk, h, M, Q, LW)
+            lmatrix(D, P, C, tk, h, M, Q, LW)
+            return OK
         return matrix
 
     def complex_step(D, P, C, tk, h, zs, pt, M, TW):
@@ -324,18 +326,19 @@ def _tangent_impl(D, P, C, tk, h, zs, pt, M, TW):
             zc[j] += 1j * COMPLEX_STEP
             status, _ = step(D, P, C, tk, h, zc, pt + 0j, Wc)
             if status != OK:
-                return status, 0.0
+                return status
             for r in range(m):
                 M[r, j] = zc[r].imag / COMPLEX_STEP
-        return OK, 0.0
+        return OK
     return complex_step
 
 
-def _member(D, P, C, tk, h, Z, i, z, old, zs, W, e, up, down, S, Cc, by_map, M, TW, s):
+def _member(D, P, C, tk, h, Z, i, z, old, zs, W, e, up, down, S, Cc, by_map, M, TW):
     """Member i's step from Z[i] (old <- Z[i], z <- the new state) and its p_t sum (S, Cc): the
     member step (_advance), or where by_map on a linear scene the step matrix M of _tangent applied
-    as kernels.loops' step-matrix loop applies it, with TW's Q (formed where a run of more than one
-    member records nothing: tangent_work) for p_t (zs: scratch). Returns (status, S, Cc)."""
+    as kernels.loops' step-matrix loop applies it, without p_t (S, Cc returned as they came: no
+    figure of a run that records nothing reads a member's p_t but member 0's, and forming Q for it
+    cost the app's long run 4-6 ns of a 68 ns step; zs: scratch). Returns (status, S, Cc)."""
 
 
 @njit(**INLINE)
@@ -348,29 +351,27 @@ def _stepped(D, P, C, tk, h, Z, i, z, old, W, e, up, down, S, Cc):
 
 
 @overload(_member, jit_options=_INLINE)
-def _member_impl(D, P, C, tk, h, Z, i, z, old, zs, W, e, up, down, S, Cc, by_map, M, TW, s):
+def _member_impl(D, P, C, tk, h, Z, i, z, old, zs, W, e, up, down, S, Cc, by_map, M, TW):
     if not _scene(P).linear:
-        return lambda D, P, C, tk, h, Z, i, z, old, zs, W, e, up, down, S, Cc, by_map, M, TW, s: _stepped(
+        return lambda D, P, C, tk, h, Z, i, z, old, zs, W, e, up, down, S, Cc, by_map, M, TW: _stepped(
             D, P, C, tk, h, Z, i, z, old, W, e, up, down, S, Cc)
 
-    def by_matrix(D, P, C, tk, h, Z, i, z, old, zs, W, e, up, down, S, Cc, by_map, M, TW, s):
+    def by_matrix(D, P, C, tk, h, Z, i, z, old, zs, W, e, up, down, S, Cc, by_map, M, TW):
         if not by_map:
             return _stepped(D, P, C, tk, h, Z, i, z, old, W, e, up, down, S, Cc)
-        quad = apply_matrix(Z, i, M, TW[1], old, zs, z, P, e, up, down)
+        apply_matrix(Z, i, M, TW[1], old, zs, z, P, e, up, down)
         _rescale(z, P, e, up, down)
-        sum_, comp = _add(S, Cc, -(0.5 * quad + s))
-        return np.int64(OK), sum_, comp
+        return np.int64(OK), S, Cc
     return by_matrix
 
 
 @njit(**INLINE)
-def _flush(env, tb, b, t, bin_):
+def _flush(env, tb, b, t, h_min, h_max, vol_min, vol_max, det, symp):
     """Bin b's time and figures (min and max of H + p_t and of the volume estimator, max of the
     defects) into tb and env (rows preset to the identities of min and max)."""
     if b >= 0:
         tb[b] = t
-        for j in range(6):
-            env[b, j] = bin_[j]
+        env[b, 0], env[b, 1], env[b, 2], env[b, 3], env[b, 4], env[b, 5] = h_min, h_max, vol_min, vol_max, det, symp
 
 
 @njit(**INLINE)
@@ -387,14 +388,12 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
     Ce = coef_table(D, P)
     W = work(D, P, 0.0)
     records = Trec.shape[0] > 0
-    TW = tangent_work(D, P, Z.shape[0] > 1 and not records)  # Q for _member's step matrix
-    V = vectors(P, 5, 0.0)
-    z, old, zs, y, yold = V[0], V[1], V[2], V[3], V[4]
-    MB = matrices(P, 3, 0.0)
-    M, B, A = MB[0], MB[1], MB[2]
+    TW = tangent_work(D, P)
+    V = vectors(P, 6, 0.0)
+    z, old, zs, y, yold, inc = V[0], V[1], V[2], V[3], V[4], V[5]
+    MB = matrices(P, 4, 0.0)
+    M, B, A, X = MB[0], MB[1], MB[2], MB[3]
     m = 2 * ndof(P)
-    X = np.empty((m, m))
-    inc = np.empty(m)
     figures = F.shape[0] > 0
     volume = Z.shape[0] >= m + 2 and (width > 0 or figures)  # the paper's estimator, for bins or figures
     rec, member0 = np.int64(0), np.int64(0)  # int64, not literals (kernels.loops, LITERALS)
@@ -409,7 +408,8 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
     if growing:
         _copy(G, A, m)
     gscale, gexp = gstate[0], int(gstate[1])
-    bin_ = np.empty(6)  # the current bin's figures (as env's columns)
+    # the current bin's figures (env's columns), in local variables as the maxima are
+    h_min = h_max = vol_min = vol_max = det_max = symp_max = 0.0
     b, tbin = np.int64(-1), 0.0
     # Countdowns to the next mapped step, record and bin: a remainder per step (k % every) is an
     # integer division, tens of cycles (with the offsets as tuples, damped midpoint's run with every
@@ -420,7 +420,7 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
     for r in range(m):
         y[r] = Z[0, r]
     pt0, S0, C0 = PT[0], S[0], Cc[0]
-    hnew = s = 0.0
+    hnew = 0.0
     prev = 0
     tau = 0.0
     up = down = 1.0
@@ -436,7 +436,7 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
             for r in range(m):
                 zs[r] = y[r]
             _rescale(zs, P, e, down, up)
-            status, s = _tangent(D, P, C, tk, h, zs, pt0, M, TW)
+            status = _tangent(D, P, C, tk, h, zs, pt0, M, TW)
             if status != OK:
                 done, in_tangent = k, True
                 break
@@ -463,14 +463,21 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
         S0, C0, pt0 = sum_, comp, sum_ - comp
         if recording:
             _record(rec, member0, y, yold, pt0, Zrec, PTrec, dZrec, P)
-        by_map = mapped and not records
+        by_map = mapped and not records and is_linear(P)
         for i in range(1, Z.shape[0]):
             status, sum_, comp = _member(D, P, C, tk, h, Z, i, z, old, zs, W, e, up, down, S[i], Cc[i],
-                                         by_map, M, TW, s)
-            status = _accept(status, i, z, old, sum_ - comp, Z, PT, rec, recording, Zrec, PTrec, dZrec, P)
-            if status != OK:
-                break
-            S[i], Cc[i] = sum_, comp
+                                         by_map, M, TW)
+            if by_map:  # the step matrix's state alone: its p_t is not carried (_member)
+                if not _finite(0.0, z, P):
+                    status = OVERFLOW
+                    break
+                for r in range(m):
+                    Z[i, r] = z[r]
+            else:
+                status = _accept(status, i, z, old, sum_ - comp, Z, PT, rec, recording, Zrec, PTrec, dZrec, P)
+                if status != OK:
+                    break
+                S[i], Cc[i] = sum_, comp
             if volume and 1 <= i <= m + 1:
                 _volume_row(X, inc, i, z, old, P)
         if status != OK:
@@ -497,21 +504,21 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
             rec += 1
         if width > 0:
             if bin_in == 0:
-                _flush(env, tb, b, tbin, bin_)
+                _flush(env, tb, b, tbin, h_min, h_max, vol_min, vol_max, det_max, symp_max)
                 b, tbin, bin_in = b + 1, t1, width
-                for j in range(6):
-                    bin_[j] = env[b, j]
+                h_min, h_max, vol_min, vol_max, det_max, symp_max = (env[b, 0], env[b, 1], env[b, 2], env[b, 3],
+                                                                     env[b, 4], env[b, 5])
             bin_in -= 1
-            bin_[0] = _least(bin_[0], hext)
-            bin_[1] = _most(bin_[1], hext)
+            h_min = _least(h_min, hext)
+            h_max = _most(h_max, hext)
             if volume:
-                bin_[2] = _least(bin_[2], vol)
-                bin_[3] = _most(bin_[3], vol)
+                vol_min = _least(vol_min, vol)
+                vol_max = _most(vol_max, vol)
             if mapped:
-                bin_[4] = _most(bin_[4], dev)
-                bin_[5] = _most(bin_[5], symp)
+                det_max = _most(det_max, dev)
+                symp_max = _most(symp_max, symp)
     if width > 0:
-        _flush(env, tb, b, tbin, bin_)
+        _flush(env, tb, b, tbin, h_min, h_max, vol_min, vol_max, det_max, symp_max)
     _store(Z, PT, member0, y, pt0, P)
     S[0], Cc[0] = S0, C0
     acc[0], acc[1], acc[2], acc[3] = hmax, dmax, smax, rmax
