@@ -154,6 +154,19 @@ def test_the_heat_map_taps_to_the_cell_under_the_click_and_marks_failures(tongue
     assert plot.mapper.nan_color == "black"
 
 
+def test_a_map_of_nearly_one_colour_says_so_and_where_to_look(tongue):
+    """At the charged scene's paper values (B0 0.05, T 20) every cell of the w x eps map grows alike;
+    the tongue map's cells differ by decades and get no such sentence."""
+    s = Study(scene="charged")
+    m = StabilityMap(s, nx=3, ny=3)
+    m.start()
+    z = m.result.values["growth"]
+    assert z.max() <= maps.UNIFORM * z.min()
+    assert "Nearly one colour" in maps.uniform_text(m.result) and f"{z.min():.3g}" in maps.uniform_text(m.result)
+    _, tongue_map = tongue
+    assert maps.uniform_text(tongue_map.result) == "" and maps.uniform_text(None) == ""
+
+
 def test_growth_is_coloured_in_e_folds_from_one_over_T_and_round_off_is_one_colour(tongue):
     """Midpoint on the decaying oscillator: every one-step map is a rotation, so the growth is
     round-off (|growth| ~ 1e-16) in every cell; below 1/T (one e-fold over the run) it is the

@@ -43,6 +43,7 @@ MEASURE_TITLES = {"growth": "growth, ln σmax / T", "H_ext_max_abs": "max |H + p
                   "det_max_dev": "max |det M − 1|", "error_final": "relative error at T"}
 HEIGHT = 480
 SIGNIFICANT = 4  # a cell opened in Orbits carries its values to this many significant digits
+UNIFORM = 2.0  # a map whose values lie within this factor is said to be nearly one colour (uniform_text)
 
 
 def map_axes(scene):
@@ -367,6 +368,23 @@ def since_text(shown, asked):
             "to compute it with them.</p>")
 
 
+def uniform_text(result):
+    """A sentence where every finite value of the map lies within a factor UNIFORM of the others
+    (positive values): one colour, which shows nothing. At the charged scene's paper values (B0 0.05,
+    T 20) the w x eps map's growth is 0.15-0.2 in every cell, where its first view (B0 1, T 300)
+    shows the tongues."""
+    if result is None:
+        return ""
+    z = result.values[result.plan.measures[0]]
+    z = z[np.isfinite(z)]
+    if len(z) < 2 or not 0 < z.min() or z.max() > UNIFORM * z.min():
+        return ""
+    return (f"<p class='doc'><b>Nearly one colour:</b> the measure ({MEASURE_TITLES[result.plan.measures[0]]}) lies "
+            f"between {z.min():.3g} and {z.max():.3g} in every cell, so nothing stands out on this grid at these fixed "
+            "values and horizon. Slow instabilities show over a longer T, or with other fixed values: the Scene "
+            "menu's first view of each scene sets values where its map has structure.</p>")
+
+
 def map_failures(result):
     if result is None:
         return ""
@@ -426,7 +444,7 @@ class StabilityMapView(FeatureView):
         plan = result.plan if result else asked
         self.text.object = MAP_TEXT.format(command=html.escape(map_command(plan)) if plan else
                                            "cosymp sweep SCENE --vary NAME=START:STOP:NUM ...")
-        self.failures.object = map_failures(result)
+        self.failures.object = map_failures(result) + uniform_text(result)
         self.since.object = "" if m.running else since_text(result.plan if result else None, asked)
         plot = None
         if result is not None:
