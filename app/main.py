@@ -41,6 +41,7 @@ AHEAD_IDLE_S = 1.0  # after the last change in any page of the server
 GONE_MS = 1000  # a page whose browser has gone this long stops (App._watch)
 URL_MS = 250  # the URL follows a change of the shown state this long after (App._write_url)
 DISCARDING = set()  # the tasks discarding closed pages' sessions (App._discard)
+TOP_JS = "const main = document.getElementById('main'); if (main) main.scrollTop = 0;"  # the template's scrolled area
 COPY_LINK_JS = """
 const label = 'Copy link to this view';
 const done = (text) => { source.label = text; setTimeout(() => { source.label = label; }, 2500); };
@@ -97,6 +98,8 @@ class App(param.Parameterized):
                             active=names.index(self.study.view), sizing_mode="stretch_width")
         self._show(self.study.view)
         self.tabs.param.watch(lambda e: setattr(self.study, "view", names[e.new]), "active")
+        # A tab opens at its top: opened from a map cell far down the page, Orbits kept the map's scroll.
+        self.tabs.jscallback(active=TOP_JS)
         self.study.param.watch(self._on_view, "view")
         self.study.param.watch(self._on_message, "message")
         self.study.param.watch(lambda e: self._write_url(), "results")

@@ -360,8 +360,9 @@ VISIBLE_TOOLTIPS_JS = """() => {
 def test_stability_map_shows_the_mathieu_tongue_and_a_click_opens_the_cell(page):
     """The default map of the modulated scene (alpha 0.5...4.5 x eps 0...0.8, 30 x 30 cells) is
     computed in the background; a click on the cell nearest (alpha, eps) = (2, 0.6), inside the
-    principal tongue, opens that run in the Orbits view with those values. The cell's tooltip, shown
-    while the mouse was on it, is gone when the map's tab is shown again (it stayed there)."""
+    principal tongue, opens that run in the Orbits view with those values, scrolled to its top (it
+    kept the map's scroll). The cell's tooltip, shown while the mouse was on it, is gone when the
+    map's tab is shown again (it stayed there)."""
     page.open(query(scene="modulated", view="map"))  # computed by the tab's first showing, or recalled
     page.page.locator("b.wpstatus").filter(has_text=re.compile("done in|by this server")).wait_for(timeout=120_000)
     title = f"{MEASURE_TITLES['growth']} of midpoint on modulated"
@@ -370,12 +371,16 @@ def test_stability_map_shows_the_mathieu_tongue_and_a_click_opens_the_cell(page)
     page.shot("12-stability-map")
     alphas, epss = np.linspace(0.5, 4.5, 30), np.linspace(0.0, 0.8, 30)
     a, e = alphas[np.argmin(abs(alphas - 2.0))], epss[np.argmin(abs(epss - 0.6))]
+    page.page.set_viewport_size({"width": 1400, "height": 800})  # a laptop's: the map's tab scrolls
+    page.page.evaluate("() => { document.getElementById('main').scrollTop = 300; }")
+    page.page.wait_for_function("() => document.getElementById('main').scrollTop > 0")
     pixel = page.page.evaluate(MAP_PIXEL_JS, [title, a, e])
     page.page.mouse.move(pixel["x"] - 3, pixel["y"])
     page.page.mouse.move(pixel["x"], pixel["y"])
     page.page.wait_for_function(f"() => ({VISIBLE_TOOLTIPS_JS})() == 1")
     page.page.mouse.click(pixel["x"], pixel["y"])
     expect(page.page.locator(".bk-tab.bk-active")).to_have_text("Orbits")
+    page.page.wait_for_function("() => document.getElementById('main').scrollTop === 0")
     page.page.wait_for_url(lambda url: "alpha" in url)
     values = json.loads(parse_qs(urlparse(page.page.url).query)["p"][0])
     assert values == {"alpha": significant(a), "eps": significant(e)}
