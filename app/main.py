@@ -23,7 +23,7 @@ from .memory import Collector, log_when_freed, map_large_blocks
 from .page import LOG, SCRIPTS, SPARE_READY, SPARE_SAID, Activity, Design, Spares, adjust_panel, serve_locally
 from .plotting import katex_fonts_css, push, rule
 from .presets import URL_NAMES, parse_items, query_items
-from .study import Controls, PresetLinks, SceneInfo, Study, study_report
+from .study import Controls, PresetLinks, SceneInfo, Study, report_filename, study_report
 from .warmup import prepare
 
 ASSETS = Path(__file__).resolve().parent.parent / "assets"
@@ -370,6 +370,7 @@ class App(param.Parameterized):
 
     def _report(self):
         """The report file of the current comparison; bad input becomes a message and a file saying so."""
+        self._download.filename = report_filename(self.study)
         try:
             text = study_report(self.study)
         except (InputError, RunError) as err:
@@ -386,9 +387,9 @@ class App(param.Parameterized):
         # (Panel's own busy indicator, off below, did that on every event).
         spinner = pn.indicators.LoadingSpinner(value=True, size=24, styles=pn.bind(
             lambda *running: {"opacity": "1" if any(running) else "0"}, *(j.param.running for j in self.jobs)))
-        download = pn.widgets.FileDownload(callback=self._report, filename="cosymp-report.html",
-                                           label="Download report (HTML)", button_type="primary",
-                                           sizing_mode="stretch_width")
+        download = self._download = pn.widgets.FileDownload(
+            callback=self._report, filename="cosymp-report.html", label="Download report (HTML)",
+            button_type="primary", sizing_mode="stretch_width")
         return pn.template.BootstrapTemplate(
             title="cosymp: structure-preserving integrators for time-dependent Hamiltonians",
             logo=str(ASSETS / "logo.svg"), favicon=str(ASSETS / "logo.svg"), header_background="#0b3d91",

@@ -418,6 +418,11 @@ class Study(Job):
         note_rate(SECONDS_PER_STEP, (scene, *(s.method.name for s in setups)), self.run, check_step(h, T))
 
 
+def report_filename(study):
+    """The report's file name, also in its 'Reproduce' command: the scene and the method."""
+    return f"cosymp-{study.scene}-{study.method}.html"
+
+
 def study_report(study):
     """The HTML report of the study's comparison (the views' own runs when they match the
     inputs, else computed afresh), or InputError saying what to change."""
@@ -430,7 +435,7 @@ def study_report(study):
             e.comparison is None or e.comparison.setup.values == s.values for e, s in zip(runs.entries, setups)) \
             and [e.method for e in runs.entries] == [s.method.name for s in setups]:
         computed = [(e.comparison, e.failure) for e in runs.entries]
-    report = scene_report(setups, h, T, report_command(setups, h, T, "cosymp-report.html"), computed=computed)
+    report = scene_report(setups, h, T, report_command(setups, h, T, report_filename(study)), computed=computed)
     return render(report)
 
 

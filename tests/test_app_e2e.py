@@ -435,9 +435,9 @@ def test_download_report_saves_a_self_contained_file_that_draws_offline(page, br
         button.click()
     path = ARTIFACTS / "app-report.html"
     download.value.save_as(path)
-    assert download.value.suggested_filename == "cosymp-report.html"
+    assert download.value.suggested_filename == "cosymp-decaying-midpoint.html"
     text = path.read_text(encoding="utf-8")
-    assert "cosymp report decaying --method midpoint --vs rk4" in text
+    assert "cosymp report decaying --method midpoint --vs rk4" in text and "-o cosymp-decaying-midpoint.html" in text
     assert "No report" not in text
     page.check()
     blocked, errors, plots, drawn = open_report_offline(browser, path, "app-report.png")

@@ -385,3 +385,20 @@ def test_every_family_has_a_marker_of_its_own():
     shapes = [next(iter(markers)) for markers in families.values()] + [method_marker("scipy-DOP853")]
     assert len(set(shapes)) == len(shapes) == len(FAMILY_MARKERS)
     assert method_marker("theta(0.3)") == method_marker("midpoint") == "circle" and method_marker("rk4") == "triangle"
+
+
+def test_the_apps_report_lists_the_parameters_in_effect_and_is_named_for_its_run():
+    """A typed beta(t) leaves B0, eps and w without effect (the app disables them): the report's
+    table leaves them out and says so; the paper's beta(t) uses all three."""
+    from app.study import Study, report_filename, study_report
+
+    def rows(study):
+        return re.findall(r"<tr><td>(\w+)</td>", study_report(study).split("<caption>Figures")[0])
+
+    study = Study(scene="charged", T=1.0, values={"beta": "cos(t)"})
+    assert {"m", "e", "beta", "gauge"} <= set(rows(study)) and not {"B0", "eps", "w"} & set(rows(study))
+    assert "(B0, eps, w: no effect with these values)" in study_report(study)
+    study.values = {"beta": "paper"}
+    assert {"B0", "eps", "w", "beta"} <= set(rows(study))
+    assert report_filename(study) == "cosymp-charged-midpoint.html"
+    assert "-o cosymp-charged-midpoint.html" in study_report(study)

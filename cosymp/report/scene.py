@@ -49,8 +49,11 @@ def scene_report(setups, h, T, cmd, progress=None, computed=None):
         err = float(c.error[-1]) if c is not None and c.error is not None and not failure else None
         runs.append((s, c, failure, err))
     report(total, total, "done")
+    values = setups[0].values
+    unused = scene.unused(values)  # e.g. B0, eps and w beside a typed beta(t)
     params = Table(["parameter", "value", "meaning"],
-                   [[p.name, setups[0].values[p.name], p.doc] for p in scene.params], caption="Parameters")
+                   [[p.name, values[p.name], p.doc] for p in scene.params if p.name not in unused],
+                   caption="Parameters" + (f" ({', '.join(unused)}: no effect with these values)" if unused else ""))
     numbers = Table(["method", "max |H + p_t|", "max |det M_k − 1|", "max ||MᵀJM − J||", "final relative error", "steps",
                      "integration time (s)", "stopped"],
                     [_numbers(s, c, failure, err) for s, c, failure, err in runs],
