@@ -297,6 +297,10 @@ class Study(Job):
     def setups(self):
         """The two checked setups, or InputError saying what to change."""
         scene = self.scene_obj
+        for m in (self.method, self.other):
+            reason = METHODS[m].refusal(scene, titles=True)  # named as the menus name them
+            if reason:
+                raise InputError(reason)
         return tuple(Setup.make(scene, m, self.values, theta_for(m, self.theta)) for m in (self.method, self.other))
 
     def check_horizon(self):

@@ -221,20 +221,25 @@ class Method:
             return "none"
         return self.preserves
 
-    def refusal(self, scene):
-        """None if the method applies to the scene, else the reason it does not."""
+    def refusal(self, scene, titles=False):
+        """None if the method applies to the scene, else the reason it does not: naming the method
+        and scenes as the command line does, or with `titles` as the app's menus do."""
+        method = self.title if titles else f"method '{self.name}'"
+        named = f"“{scene.title}”" if titles else f"scene '{scene.name}'"
+
+        def on(attr):
+            return ", ".join(f"“{s.title}”" if titles else s.name for s in _with(attr))
+
         if self.requires == "separable" and not scene.separable:
-            return (f"method '{self.name}' splits H = T(p, t) + V(q, t) and scene '{scene.name}' is not "
-                    f"separable: use it on {', '.join(_with('separable'))}")
+            return (f"{method} splits H = T(p, t) + V(q, t) and {named} is not separable: use it on "
+                    f"{on('separable')}")
         if self.requires == "integrable" and not scene.near_integrable:
-            return (f"method '{self.name}' splits H = H0 + (H - H0), H0's flow in closed form and H - H0 small, and "
-                    f"scene '{scene.name}' declares no such H0: use it on {', '.join(_with('near_integrable'))}")
+            return (f"{method} splits H = H0 + (H - H0), H0's flow in closed form and H - H0 small, and {named} "
+                    f"declares no such H0: use it on {on('near_integrable')}")
         if self.requires == "flow" and not scene.has_flow:
-            return (f"method '{self.name}' needs a closed-form flow and scene '{scene.name}' has none: "
-                    f"use it on {', '.join(_with('has_flow'))}")
+            return f"{method} needs a closed-form flow and {named} has none: use it on {on('has_flow')}"
         if self.requires == "fields" and not scene.has_fields:
-            return (f"method '{self.name}' pushes a charge in E and B fields; scene '{scene.name}' has "
-                    f"none: use it on {', '.join(_with('has_fields'))}")
+            return f"{method} pushes a charge in E and B fields; {named} has none: use it on {on('has_fields')}"
         return None
 
     def data(self, theta=None):
@@ -251,7 +256,7 @@ class Method:
 def _with(attr):
     from .scenes import SCENES
 
-    return [s.name for s in SCENES.values() if getattr(s, attr)]
+    return [s for s in SCENES.values() if getattr(s, attr)]
 
 
 @cache

@@ -449,6 +449,9 @@ def test_picking_a_scene_opens_its_first_views_methods_and_keeps_what_was_change
     good = s.results
     s.param.update(scene="charged", method="leapfrog")
     assert s.message.level == "error" and "not separable" in s.message.text
+    # named as the menus name them, not by the command line's names
+    assert s.message.text.startswith("Störmer-Verlet leapfrog splits") and "“Charged particle" in s.message.text
+    assert "'leapfrog'" not in s.message.text and "'charged'" not in s.message.text
     assert (s.scene, s.method, s.results) == ("damped", "midpoint", good)
     assert type(s.inputs) is study.inputs_class("damped"), "the controls show the scene put back"
 

@@ -178,7 +178,7 @@ def phase_note(kept, lost, bounded):
                "error, not the phase." if bounded else "follows the trajectory less closely at this h."))
 
 
-NUMBER_ROWS = ("max |H + p_t|", "max |det M - 1|", "max |M^T J M - J|", "final relative error", "steps",
+NUMBER_ROWS = ("max |H + p_t|", "max |det M_k − 1|", "max ||MᵀJM − J||", "final relative error", "steps",
                "integration time, wall clock (s)", "CPU time with diagnostics, its thread (s)")
 
 

@@ -226,9 +226,9 @@ class LongRun(Job):
 # (title, value label, log axis, the envelope: (t, y) of a method's arrays)
 PLOTS = {
     "H": ("H~ = H + p_t, per-bin min and max", "H + p_t", False, "H"),
-    "vol": ("paper's estimator: det[X¹ … X²ⁿ⁺¹], per bin", "det[X1 ... X(2n+1)]", False, "vol"),
-    "det": ("rigorous: max |det M_k − 1| per bin", "|det M - 1|", True, "det"),
-    "symp": ("rigorous: max |M_kᵀ J M_k − J| per bin", "|M^T J M - J|", True, "symp"),
+    "vol": ("paper's estimator: det[X¹ … X²ⁿ⁺¹], per bin", "det[X¹ … X²ⁿ⁺¹]", False, "vol"),
+    "det": ("rigorous: max |det M_k − 1| per bin", "|det M_k − 1|", True, "det"),
+    "symp": ("rigorous: max |M_kᵀ J M_k − J| per bin", "|M_kᵀ J M_k − J|", True, "symp"),
 }
 
 

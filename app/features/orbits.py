@@ -110,11 +110,11 @@ def remark(runs):
         return SPLIT.format(against="relative to the exact flow")
     against = next((e.comparison.against for e in runs.ok if e.comparison.against), None)
     if against is None:
-        return (f"<p class='doc'>No closed-form flow for '{runs.scene}', and its reference would take more than "
+        return (f"<p class='doc'>No closed-form flow for this scene, and its reference would take more than "
                 f"{LIVE_REFERENCE_STEPS:.0e} rk8 steps here: no trajectory error plot; the report or "
                 "<code>cosymp run</code> measure the final error.</p>")
-    return SPLIT.format(against=f"relative to a reference run, {against}, as in the report (no closed-form flow "
-                                f"for '{runs.scene}')")
+    return SPLIT.format(against=f"relative to a reference run, {against}, as in the report (this scene has no "
+                                "closed-form flow)")
 
 
 class OrbitsView(FeatureView):

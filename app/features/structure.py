@@ -30,12 +30,12 @@ SYMPLECTIC_TEXT = ("<h4>Symplectic form</h4><p class='doc'>The paper's estimator
 # (title, value label, log axis, the series of a comparison)
 PLOTS = {
     "energy": ("H~ = H + p_t", "H + p_t", False, lambda c: (c.run.t[1:], c.run.H_ext[1:, 0])),  # 0 at t = 0
-    "paper_volume": ("paper's estimator: det[X¹ … X²ⁿ⁺¹]", "det[X1 ... X(2n+1)]", False,
+    "paper_volume": ("paper's estimator: det[X¹ … X²ⁿ⁺¹]", "det[X¹ … X²ⁿ⁺¹]", False,
                      lambda c: (c.run.t[1:], c.paper_volume)),
-    "det": ("rigorous: |det M_k − 1|", "|det M - 1|", True, lambda c: (c.run.t[:-1], c.det_dev)),
-    "paper_omega": ("paper's estimator: ω(X¹, X²)", "omega(X1, X2)", False, lambda c: (c.run.t[1:], c.paper_omega)),
-    "symp": ("rigorous: max |M_kᵀ J M_k − J|", "|M^T J M - J|", True, lambda c: (c.run.t[:-1], c.symp_dev)),
-    "separation": ("rigorous: ω(δ¹, δ²)/δ² of nearby runs", "omega(d1, d2) / delta^2", False,
+    "det": ("rigorous: |det M_k − 1|", "|det M_k − 1|", True, lambda c: (c.run.t[:-1], c.det_dev)),
+    "paper_omega": ("paper's estimator: ω(X¹, X²)", "ω(X¹, X²)", False, lambda c: (c.run.t[1:], c.paper_omega)),
+    "symp": ("rigorous: max |M_kᵀ J M_k − J|", "|M_kᵀ J M_k − J|", True, lambda c: (c.run.t[:-1], c.symp_dev)),
+    "separation": ("rigorous: ω(δ¹, δ²)/δ² of nearby runs", "ω(δ¹, δ²) / δ²", False,
                    lambda c: (c.run.t, c.separation_omega)),
     "area": ("carried loop: area / initial area", "area / initial area", False, lambda c: (c.cloud.t, c.cloud_area)),
 }

@@ -128,9 +128,9 @@ class ThetaView(FeatureView):
         lesson = self.state
         self.sweeps = {k: Pair(figure(title, "θ", label, logy=True), dots=True)
                        for k, title, label in (("det", "max |det M_k − 1| over the first steps, against θ",
-                                                "max |det M - 1|"),
+                                                "max |det M_k − 1|"),
                                                ("symp", "max |M_kᵀ J M_k − J| over the first steps, against θ",
-                                                "max |M^T J M - J|"))}
+                                                "max |M_kᵀ J M_k − J|"))}
         self.marks = [vline(p.fig) for p in self.sweeps.values()]
         # |H~| and the carried area on log axes from the start: the naive method's drift decades away from
         # the lifted one's at most θ, and a linear figure swapped for a log one at the first data cost the

@@ -92,7 +92,7 @@ def _numbers(s, c, failure, err):
         return [s.method.label(s.theta), np.nan, np.nan, np.nan, np.nan, 0, np.nan, failure]
     n = c.summary
     final = n["final relative error"] if n["final relative error"] is not None else (np.nan if err is None else err)
-    return [s.method.label(s.theta), n["max |H + p_t|"], n["max |det M - 1|"], n["max |M^T J M - J|"], final, n["steps"],
+    return [s.method.label(s.theta), n["max |H + p_t|"], n["max |det M_k − 1|"], n["max ||MᵀJM − J||"], final, n["steps"],
             c.run.wall_s, failure or "no"]
 
 
