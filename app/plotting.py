@@ -72,8 +72,10 @@ function fmt(v, step, exp) {
 }
 if (span > 0 && span < 1e-4 * big) {
   // The reference is the tick written with the fewest significant digits (1, not 0.999997), the
-  // one nearest the middle among equals; the others are offsets from it.
-  const sig = (v) => { for (let p = 1; p < 17; p++) if (Math.abs(Number(v.toPrecision(p)) - v) <= 1e-6 * step) return p; return 17; };
+  // one nearest the middle among equals; the others are offsets from it. A tick is "written" to a
+  // few ulps of its own: BokehJS's 1 can be 0.9999999999999999, which a tolerance of the step
+  // alone (5e-17 for steps of 5e-11) read as 17 digits, making 1.00000000005 the reference.
+  const sig = (v) => { for (let p = 1; p < 17; p++) if (Math.abs(Number(v.toPrecision(p)) - v) <= Math.max(1e-6 * step, 4 * Number.EPSILON * Math.abs(v))) return p; return 17; };
   const mid = Math.floor(finite.length / 2);
   let at = mid;
   finite.forEach((v, i) => { if ((sig(v) - sig(finite[at]) || Math.abs(i - mid) - Math.abs(at - mid)) < 0) at = i; });

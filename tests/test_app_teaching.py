@@ -103,6 +103,9 @@ def test_03_tick_labels_are_compact_and_distinct(page):
     assert fmt([1 - 2 ** -52, 1, 1 + 2 ** -52]) == ["1−2.22e-16", "1", "1+2.22e-16"]
     assert len(set(fmt([2e-6, 2.0000001e-6, 2.0000002e-6]))) == 3
     assert fmt([0.999997, 0.999998, 0.999999, 1, 1.000001]) == ["1−3e-6", "1−2e-6", "1−1e-6", "1", "1+1e-6"]
+    # BokehJS's ticks a few ulps off their round values (the ω(δ¹, δ²)/δ² axis read 1.00000000005, −5e-11)
+    assert fmt([0.9999999999000001, 0.99999999995, 1.0000000000000002, 1.00000000005]) == [
+        "1−1e-10", "1−5e-11", "1", "1+5e-11"]
     log = page.page.evaluate(f"(ticks) => ({FORMAT_JS})(ticks, 'crowded')", [1e-17, 1e-16, 2e-16, 3e-16, 4e-16, 5e-16])
     assert log == ["1e-17", "1e-16", "2e-16", "", "", "5e-16"], "log ticks inside a decade are thinned to 1, 2, 5"
     narrow = page.page.evaluate(f"(ticks) => ({FORMAT_JS})(ticks, 'crowded')", [1, 1.0005, 1.001, 1.0015, 1.002])
