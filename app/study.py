@@ -314,6 +314,9 @@ class Study(Job):
         if steps > LIVE_MAX_STEPS:
             raise InputError(f"T/h = {steps:.3g} steps is beyond the live views' limit of "
                              f"{LIVE_MAX_STEPS:.0e}: increase h, shorten T, or use the Long run view")
+        vals = self.checked_values()
+        if vals is not None:
+            self.scene_obj.check_horizon(vals, steps * self.h)  # a typed beta(t)'s pole (the runs end there)
         return steps
 
     def _make_inputs(self):

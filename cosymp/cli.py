@@ -245,7 +245,9 @@ def _report(args, out, err):
                   for m in (args.method, args.vs)]
         h = scene.h if args.h is None else args.h
         T = scene.T if args.T is None else args.T
-        check_reference(setups[0], check_step(h, T) * h)
+        end = check_step(h, T) * h
+        check_reference(setups[0], end)
+        scene.check_horizon(setups[0].values, end)
         keys = warm.run_keys(scene, [s.method.name for s in setups])
     _compile_first(keys, err)
     with shown(err) as progress:

@@ -17,6 +17,8 @@ MAX_LENGTH = 500
 MAX_DEPTH = 40
 MAX_NODES = 400
 MAX_PROGRAM = 20_000
+SINGULAR_SAMPLES = 1 << 13  # intervals of [t0, t1] in which Expr.singularity looks for a divisor's sign change
+BISECTIONS = 60
 
 OP_END = 0
 OP_CONST = 1
@@ -513,6 +515,62 @@ def _diff_node(node, d):
     return _mul(outer, d[0])
 
 
+# Singularities.
+
+
+def _divisors(root):
+    """The distinct subtrees that divide somewhere in root: denominators, bases of negative
+    constant powers, and the cosine of tan's argument."""
+    found, seen, stack = [], set(), [root]
+    while stack:
+        node = stack.pop()
+        if id(node) in seen:
+            continue
+        seen.add(id(node))
+        kind = node[0]
+        if kind == "div":
+            found.append(node[2])
+        elif kind == "pow" and _is_num(node[2]) and node[2][1] < 0:
+            found.append(node[1])
+        elif kind == "tan":
+            found.append(("cos", node[1]))
+        stack.extend(_children(node))
+    return found
+
+
+def _sign_carriers(node):
+    """Subtrees that change sign at every zero of node: the factors of a product, the base of a
+    positive constant power, the numerator of a quotient, the argument of a negation or a square
+    root (whose zeros are node's, where node itself may keep its sign: (t - 5)^2), else node."""
+    out, stack = [], [node]
+    while stack:
+        n = stack.pop()
+        kind = n[0]
+        if kind == "mul":
+            stack.extend(n[1:3])
+        elif kind in ("neg", "sqrt", "div") or (kind == "pow" and _is_num(n[2]) and n[2][1] > 0):
+            stack.append(n[1])
+        elif kind not in ("num", "pi", "exp"):
+            out.append(n)
+    return out
+
+
+def _root(f, lo, hi, f_lo):
+    """A zero of f between lo and hi, where f changes sign (f(lo) = f_lo), by bisection."""
+    if f_lo == 0.0:
+        return lo
+    for _ in range(BISECTIONS):
+        mid = 0.5 * (lo + hi)
+        f_mid = f(mid)
+        if f_mid == 0.0:
+            return mid
+        if (f_mid > 0.0) == (f_lo > 0.0):
+            lo, f_lo = mid, f_mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
 # Rendering.
 
 
@@ -668,6 +726,31 @@ class Expr:
     def latex(self):
         """LaTeX rendering for display."""
         return _fold(self._node, _latex_node)[0]
+
+    def singularity(self, t0, t1):
+        """The first t in [t0, t1] where the expression or one of its first two derivatives is not
+        finite, or where a divisor in them vanishes (a pole the samples can step over: the sign of
+        each divisor's factors at SINGULAR_SAMPLES + 1 points, the zero then found by bisection);
+        None where there is none."""
+        ts = np.linspace(t0, t1, SINGULAR_SAMPLES + 1)
+        rows = (self, self.derivative(), self.derivative().derivative())
+        first = math.inf
+        carriers = {}
+        for row in rows:
+            bad = ~np.isfinite(row(ts))
+            if bad.any():
+                first = min(first, ts[np.argmax(bad)])
+            for divisor in _divisors(row._node):
+                for c in _sign_carriers(divisor):
+                    carriers.setdefault(_fold(c, _text_node)[0], c)
+        for c in carriers.values():
+            f = Expr(c)
+            sign = np.sign(f(ts))
+            change = np.flatnonzero(sign[:-1] * sign[1:] <= 0)  # NaN compares false
+            if len(change):
+                i = change[0]
+                first = min(first, _root(f, ts[i], ts[i + 1], sign[i]))
+        return None if first == math.inf else float(first)
 
     def __call__(self, t):
         """Value at t, a number or an array of numbers."""

@@ -66,6 +66,7 @@ def run_summary(setup, h, T, transport_from=None, with_error=True, progress=None
     defect (absolute and relative) over every step, the error at T against the exact flow or
     the reference, wall time (wall_s: the compiled run with its diagnostics)."""
     steps = check_step(h, T)
+    setup.scene.check_horizon(setup.values, steps * h)
     start = time.perf_counter()
     if transport_from:
         final, fig, wall = _transported_run(setup, h, steps, setup.with_values(gauge=transport_from), progress)

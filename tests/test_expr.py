@@ -476,6 +476,33 @@ def test_domain_errors_give_nan_or_inf():
     assert parse("exp(t)", check_finite=False)(1e3) == math.inf
 
 
+@pytest.mark.parametrize("text, pole", [
+    ("1/(t-5)", 5.0),  # sampled exactly
+    ("1/(t-5.001)", 5.001),  # between the samples: a sign change of the divisor, then bisection
+    ("1/(t-5)^2", 5.0),  # the divisor keeps its sign: its base changes it
+    ("(t-5)^(-3)", 5.0),
+    ("tan(t)", math.pi / 2),
+    ("1/sin(t+0.1)", math.pi - 0.1),
+    ("1/((t-7)*(t-3))", 3.0),  # the first of two
+    ("t/(t^2-16)", 4.0),
+    ("1/(sqrt(t+1)-3)", 8.0),
+    ("log(10-t)", 10.0),  # not finite from there on
+    ("sqrt(12-t)", 12.0),  # its derivative divides by 0 at 12
+    ("exp(-t/5)*sin(2*pi*t)", None),
+    ("1/(2+sin(t))", None),
+    ("1/(1+t^2)", None),
+    ("0.5*(1+0.3*cos(3*t))", None),
+])
+def test_singularity_is_the_first_pole_or_end_of_the_domain_in_the_range(text, pole):
+    """A typed beta(t) runs over [0, T]: its first singular point there, to round-off, or None."""
+    found = parse(text).singularity(0.0, 20.0)
+    if pole is None:
+        assert found is None
+    else:
+        assert found == pytest.approx(pole, rel=1e-12, abs=1e-12)
+    assert parse(text).singularity(0.0, 1.0) is None  # every pole here lies beyond t = 1
+
+
 def test_array_calls_keep_shape_and_match_scalars():
     e = parse("sin(t)*exp(-t^2)")
     ts = np.linspace(-2, 2, 12).reshape(3, 4)

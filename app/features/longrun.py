@@ -97,7 +97,9 @@ class LongRun(Job):
     def _inputs(self):
         s = self.study
         setups = s.setups()
-        return setups, float(s.h), check_step(s.h, self.T_long), dict(s.values), s.scene
+        steps = check_step(s.h, self.T_long)
+        s.scene_obj.check_horizon(setups[0].values, steps * s.h)
+        return setups, float(s.h), steps, dict(s.values), s.scene
 
     def _bytes(self, inputs):
         return LONG_RUN_BYTES

@@ -266,6 +266,10 @@ class Scene:
         """The parameters these values leave without effect."""
         return ()
 
+    def check_horizon(self, vals, T):
+        """InputError where these values make the scene's coefficients singular within [0, T] (none
+        here: the scenes' own coefficients are smooth; a typed beta(t) may not be)."""
+
     def pack(self, vals):
         return self.Params(*(float(vals[f]) for f in self.Params._fields))
 

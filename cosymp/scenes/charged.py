@@ -10,6 +10,7 @@ E = -beta' K q. Every other gauge is built here from its gauge function, in one 
 The paper's gauges are all of this form (table GAUGES); its printed per-gauge Hamiltonians are
 not used (the Landau one has the sign of its scalar potential flipped and lacks the charge e).
 """
+import functools
 from collections import namedtuple
 from dataclasses import dataclass
 
@@ -140,6 +141,13 @@ class BetaParam(Param):
 PAPER_BETA = r"\beta(t) = B_0\,\big(1+\varepsilon\,\sin(\omega t)\big)"
 
 
+@functools.lru_cache(maxsize=64)
+def _singularity(text, T):
+    """Expr.singularity of a typed beta(t) over [0, T], for each (text, T) once: a control change
+    checks it before every run."""
+    return parse(text).singularity(0.0, T)
+
+
 class ChargedScene(Scene):
     def shown_equations(self, vals):
         """The last line is the beta(t) the values choose: the paper's, B0, or the typed expression."""
@@ -150,6 +158,18 @@ class ChargedScene(Scene):
     def unused(self, vals):
         """eps and w shape only the paper's beta(t); B0 is not in a typed one."""
         return {"paper": (), "constant": ("eps", "w")}.get(vals["beta"], ("B0", "eps", "w"))
+
+    def check_horizon(self, vals, T):
+        """A typed beta(t) with a pole in [0, T] (1/(t - 5)): a method that never evaluates beta at the
+        pole steps over it and reaches T with large figures, one that does overflows there."""
+        beta = vals["beta"]
+        if beta in ("paper", "constant"):
+            return
+        t = _singularity(beta, float(T))
+        if t is not None:
+            raise InputError(f"beta(t) = {quoted(beta)} is singular at t = {t:.6g} (it or its derivatives are not "
+                             f"finite there, or divide by 0), inside the run's [0, {T:g}]: change beta(t), or "
+                             f"shorten T below {t:.6g}")
 
     def pack(self, vals):
         g = GAUGES[vals["gauge"]]
