@@ -177,26 +177,43 @@ def _accept(status, i, z, old, pt, Z, PT, rec, recording, Zrec, PTrec, dZrec, P)
 
 
 @njit(**INLINE)
-def apply_matrix(Z, i, M, Q, old, zs, z, P, e, up, down):
-    """A linear scene's step on member i: old <- Z[i]; z <- M zs with zs = old in the step's scaled
-    coordinates (exponent e), z left scaled; returns zs.Q zs, p_t's quadratic term (0 where Q has no
-    rows: M alone, as kernels.linear forms it)."""
-    m = 2 * ndof(P)
-    quad = 0.0
-    for r in range(m):
+def _load(Z, i, old, zs, P, e, up, down):
+    """old <- Z[i]; zs <- old in the step's scaled coordinates (exponent e)."""
+    for r in range(2 * ndof(P)):
         old[r] = Z[i, r]
         zs[r] = old[r]
     _rescale(zs, P, e, down, up)
+
+
+@njit(**INLINE)
+def apply_matrix(Z, i, M, Q, old, zs, z, P, e, up, down):
+    """A linear scene's step on member i: old <- Z[i]; z <- M zs with zs = old in the step's scaled
+    coordinates (exponent e), z left scaled; returns zs.Q zs, p_t's quadratic term."""
+    m = 2 * ndof(P)
+    quad = 0.0
+    _load(Z, i, old, zs, P, e, up, down)
     for r in range(m):
         acc = 0.0
         qr = 0.0
         for c in range(m):
             acc += M[r, c] * zs[c]
-            if Q.shape[0] > 0:
-                qr += Q[r, c] * zs[c]
+            qr += Q[r, c] * zs[c]
         z[r] = acc
         quad += zs[r] * qr
     return quad
+
+
+@njit(**INLINE)
+def apply_map(Z, i, M, old, zs, z, P, e, up, down):
+    """apply_matrix without p_t: z <- M zs alone (a test of Q's rows inside its loop cost the
+    step-matrix loop of a 4-member ensemble 20%: damped midpoint 45 -> 53 ns a step)."""
+    m = 2 * ndof(P)
+    _load(Z, i, old, zs, P, e, up, down)
+    for r in range(m):
+        acc = 0.0
+        for c in range(m):
+            acc += M[r, c] * zs[c]
+        z[r] = acc
 
 
 @njit(**INLINE)

@@ -82,7 +82,7 @@ from .loops import (
     _reusable,
     _step_start,
     _store,
-    apply_matrix,
+    apply_map,
     coef_at,
     energy_at,
 )
@@ -336,7 +336,7 @@ def _tangent_impl(D, P, C, tk, h, zs, pt, M, TW):
 def _member(D, P, C, tk, h, Z, i, z, old, zs, W, e, up, down, S, Cc, by_map, M, TW):
     """Member i's step from Z[i] (old <- Z[i], z <- the new state) and its p_t sum (S, Cc): the
     member step (_advance), or where by_map on a linear scene the step matrix M of _tangent applied
-    as kernels.loops' step-matrix loop applies it, without p_t (S, Cc returned as they came: no
+    alone (kernels.loops.apply_map), without p_t (S, Cc returned as they came: no
     figure of a run that records nothing reads a member's p_t but member 0's, and forming Q for it
     cost the app's long run 4-6 ns of a 68 ns step; zs: scratch). Returns (status, S, Cc)."""
 
@@ -359,7 +359,7 @@ def _member_impl(D, P, C, tk, h, Z, i, z, old, zs, W, e, up, down, S, Cc, by_map
     def by_matrix(D, P, C, tk, h, Z, i, z, old, zs, W, e, up, down, S, Cc, by_map, M, TW):
         if not by_map:
             return _stepped(D, P, C, tk, h, Z, i, z, old, W, e, up, down, S, Cc)
-        apply_matrix(Z, i, M, TW[1], old, zs, z, P, e, up, down)
+        apply_map(Z, i, M, old, zs, z, P, e, up, down)
         _rescale(z, P, e, up, down)
         return np.int64(OK), S, Cc
     return by_matrix
