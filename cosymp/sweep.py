@@ -206,6 +206,7 @@ def plan(scene, method, axes, measures=("growth",), values=None, theta=None, h=N
         setup, hh, TT = p.run_of(dict(zip(names, corner)))
         steps = check_step(hh, TT)
         check_horizon(TT)
+        setup.scene.check_horizon(setup.values, steps * hh)
         if "error_final" in measures:
             check_reference(setup, steps * hh)
     return p

@@ -237,6 +237,7 @@ def measure(scene, methods=None, values=None, T=None, hs=None, theta=None, peers
     """
     scene, setups = _setups(scene, methods, values, theta)
     T = scene.T if T is None else check_horizon(T)
+    scene.check_horizon(setups[0].values, T)
     if hs is not None:
         counts = sorted({check_step(h, T) for h in hs})
     else:
@@ -300,6 +301,7 @@ def drift(scene, methods=DRIFT_METHODS, values=None, h=None, horizons=None, thet
     if counts[-1] > DRIFT_MAX_STEPS:
         raise InputError(f"T = {horizons[-1]:g} takes {counts[-1]:.3g} steps of h = {h:g}, over this study's "
                          f"{DRIFT_MAX_STEPS:.0e}: increase h or shorten the horizons")
+    scene.check_horizon(setups[0].values, counts[-1] * h)
     if prepare is not None:
         prepare(warm.run_keys(scene, [s.method.name for s in setups]))
     total = len(setups) + (0 if scene.has_flow else 1)

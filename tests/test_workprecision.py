@@ -184,6 +184,8 @@ def test_cli_long_past_the_reference_says_where_and_prints_no_nan():
     (["decaying", "--long", "--h", "0.1", "0.2"], "one --h"),
     (["decaying", "--long", "--horizons", "1e12"], "exceeds the cap"),
     (["decaying", "--methods", "boris"], "pushes a charge"),
+    (["charged", "--set", "beta=tan(t)", "--T", "5"], "singular at t = 1.5708"),
+    (["charged", "--long", "--set", "beta=tan(t)"], "singular at t = 1.5708"),
     (["decaying", "--out", "/nonexistent/dir/x.csv"], "not a writable folder"),
     (["decaying", "--methods", "rk4", "--theta", "0.3"], "applies to the methods 'theta'"),
     (["decaying", "--methods", "exact", "rk4"], "'exact' is the reference"),
