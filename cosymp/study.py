@@ -63,7 +63,7 @@ class Comparison:
         return {
             "max |H + p_t|": finite_max(np.abs(self.run.H_ext[:, 0])),
             "max |det M_k − 1|": finite_max(self.det_dev) if self.det_dev.size else 0.0,
-            "max ||MᵀJM − J||": finite_max(self.symp_dev) if self.symp_dev.size else 0.0,
+            "max |M_kᵀ J M_k − J|": finite_max(self.symp_dev) if self.symp_dev.size else 0.0,
             "final relative error": None if self.error is None else float(self.error[-1]),
             "steps": int(self.run.steps),
             "integration time, wall clock (s)": self.run.wall_s,

@@ -65,7 +65,7 @@ def test_01_the_first_view_teaches_and_a_is_drawn_over_b(page):
     each orbit bold, B's dashes over A (where the orbits fill one band, A hid B)."""
     page.open()
     expect(page.page.locator(".verdict")).to_contain_text("rk4's |H + p_t| leaves midpoint's bounded band")
-    energy = wait_for_plot(page, "energy error: max |H + p_t| per bin")
+    energy = wait_for_plot(page, "energy error |H + p_t|")
     portrait = wait_for_plot(page, "phase portrait", lines=4)
     a = (METHOD_COLORS["midpoint"], True)
     b = (METHOD_COLORS["rk4"], False)

@@ -178,7 +178,7 @@ def phase_note(kept, lost, bounded):
                "error, not the phase." if bounded else "follows the trajectory less closely at this h."))
 
 
-NUMBER_ROWS = ("max |H + p_t|", "max |det M_k − 1|", "max ||MᵀJM − J||", "final relative error", "steps",
+NUMBER_ROWS = ("max |H + p_t|", "max |det M_k − 1|", "max |M_kᵀ J M_k − J|", "final relative error", "steps",
                "integration time, wall clock (s)", "CPU time with diagnostics, its thread (s)")
 
 
@@ -204,7 +204,7 @@ def ended(run, T):
 
 
 TAIL = 0.02  # the last part of a run drawn bold over its whole orbit in the portraits
-PORTRAIT_MARKS = f"dot start, bold last {TAIL:.0%}"
+PORTRAIT_MARKS = f"Portraits: a dot at the start, the last {TAIL:.0%} of each run bold."  # said below them
 
 
 def tail(x, y):
@@ -220,8 +220,8 @@ def phase_axes(scene):
     n = s.ndof
     names_ = list(s.coordinates)
     if n == 1:
-        return [(0, 1, "q", "p", f"phase portrait: {PORTRAIT_MARKS}")]
-    return [(0, 1, names_[0], names_[1], f"orbit ({names_[0]}, {names_[1]}): {PORTRAIT_MARKS}")] + [
+        return [(0, 1, "q", "p", "phase portrait")]
+    return [(0, 1, names_[0], names_[1], f"orbit ({names_[0]}, {names_[1]})")] + [
         (i, n + i, names_[i], f"p_{names_[i]}", f"({names_[i]}, p_{names_[i]})") for i in range(n)]
 
 

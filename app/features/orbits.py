@@ -12,7 +12,7 @@ from cosymp.scenes import SCENES
 from ..plotting import SLOTS, Pair, Raster, figure, grid, note, pane, path, peaks, reset_ranges, table
 from ..study import LIVE_REFERENCE_STEPS
 from .base import Feature, FeatureView
-from .common import color_key, comparisons, names, numbers, over_time, phase_axes, tail, verdict, zcols
+from .common import PORTRAIT_MARKS, color_key, comparisons, names, numbers, over_time, phase_axes, tail, verdict, zcols
 
 NUMBERS_TEXT = "<h4>Numbers</h4><p class='doc'>From the full-resolution runs: maxima over every step.</p>"
 APART = 1e3  # two orbits whose sizes differ by more than this are drawn in portraits of their own
@@ -54,9 +54,11 @@ class Figures:
         # The error split in two, each titled by what it measures: the energy error (what structure
         # preservation bounds) beside the trajectory error (which also counts the phase, where order
         # wins). One title for every scene (a changed title makes the page lay out the tab): what
-        # the trajectory is measured against is said below the plots (remark).
-        self.energy = Pair(figure("energy error: max |H + p_t| per bin", "t", "|H + p_t| (absolute)", logy=True))
-        self.error = Pair(figure("trajectory error: |z − z_ref| / |z_ref|", "t", "relative error", logy=True))
+        # the trajectory is measured against is said below the plots (remark). Titles short enough for
+        # three plots a row on a 1280-pixel projector (longer ones were cut: "energy error: max |H + p_t|
+        # per bi"); the axes say what is drawn.
+        self.energy = Pair(figure("energy error |H + p_t|", "t", "max |H + p_t| per bin", logy=True))
+        self.error = Pair(figure("trajectory error", "t", "|z − z_ref| / |z_ref|", logy=True))
         figs = [f for _, f, _ in self.portraits] + [self.energy.fig, self.error.fig]
         self.grid = grid(*[pane(f) for f in figs], ncols=3 if len(figs) in (3, 6) else 2)
 
@@ -97,7 +99,7 @@ class Figures:
             reset_ranges(p.fig)
 
 
-SPLIT = ("<p class='doc'>Two errors. <b>Energy</b>: |H + p_t|, 0 for the exact flow, which a structure-preserving "
+SPLIT = ("<p class='doc'>" + PORTRAIT_MARKS + " Two errors. <b>Energy</b>: |H + p_t|, 0 for the exact flow, which a structure-preserving "
          "method keeps in a bounded band. <b>Trajectory</b>: {against}, which also counts how far along its orbit "
          "each method has run (its phase): there a higher order wins.</p>")
 
@@ -110,7 +112,7 @@ def remark(runs):
         return SPLIT.format(against="relative to the exact flow")
     against = next((e.comparison.against for e in runs.ok if e.comparison.against), None)
     if against is None:
-        return (f"<p class='doc'>No closed-form flow for this scene, and its reference would take more than "
+        return (f"<p class='doc'>{PORTRAIT_MARKS} No closed-form flow for this scene, and its reference would take more than "
                 f"{LIVE_REFERENCE_STEPS:.0e} rk8 steps here: no trajectory error plot; the report or "
                 "<code>cosymp run</code> measure the final error.</p>")
     return SPLIT.format(against=f"relative to a reference run, {against}, as in the report (this scene has no "

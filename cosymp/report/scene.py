@@ -54,7 +54,7 @@ def scene_report(setups, h, T, cmd, progress=None, computed=None):
     params = Table(["parameter", "value", "meaning"],
                    [[p.name, values[p.name], p.doc] for p in scene.params if p.name not in unused],
                    caption="Parameters" + (f" ({', '.join(unused)}: no effect with these values)" if unused else ""))
-    numbers = Table(["method", "max |H + p_t|", "max |det M_k − 1|", "max ||MᵀJM − J||", "final relative error", "steps",
+    numbers = Table(["method", "max |H + p_t|", "max |det M_k − 1|", "max |M_kᵀ J M_k − J|", "final relative error", "steps",
                      "integration time (s)", "stopped"],
                     [_numbers(s, c, failure, err) for s, c, failure, err in runs],
                     caption="Figures over every step (final relative error |z − z_ref| / |z_ref| against "
@@ -92,7 +92,7 @@ def _numbers(s, c, failure, err):
         return [s.method.label(s.theta), np.nan, np.nan, np.nan, np.nan, 0, np.nan, failure]
     n = c.summary
     final = n["final relative error"] if n["final relative error"] is not None else (np.nan if err is None else err)
-    return [s.method.label(s.theta), n["max |H + p_t|"], n["max |det M_k − 1|"], n["max ||MᵀJM − J||"], final, n["steps"],
+    return [s.method.label(s.theta), n["max |H + p_t|"], n["max |det M_k − 1|"], n["max |M_kᵀ J M_k − J|"], final, n["steps"],
             c.run.wall_s, failure or "no"]
 
 
