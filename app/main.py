@@ -403,7 +403,10 @@ adjust_panel()
 serve_locally()
 pn.extension("katex", notifications=True, design=Design, js_files=SCRIPTS,
              global_css=[katex_fonts_css()])  # the page's head only: a shadow root's @font-face is ignored
-pn.state.notifications.position = "bottom-left"  # over the sidebar's lower part, not over the plots
+# Bottom right: at the bottom left they covered the sidebar's boxes a message asks to change (a typed
+# beta(t), x0 ...) and its Copy link and Download buttons; here they cover the lower corner of plots
+# that an error leaves as they were.
+pn.state.notifications.position = "bottom-right"
 # One recomputation of the document's model graph (a walk of every model) when the page is built,
 # not one per root the template adds (13, each over the graph so far): 0.12 s of the page's 0.37 s.
 with pn.state.curdoc.models.freeze() if pn.state.curdoc is not None else contextlib.nullcontext():
