@@ -32,7 +32,7 @@ from .jobs import Job, Note
 from .plotting import equation, note, push
 from .presets import HARD, PAPER, PRESETS, URL_NAMES, first_state, rounded
 from .warmup import first_view
-from .widgets import Menu, bound, empty
+from .widgets import bound, empty
 
 LIVE_MAX_STEPS = 2_000_000
 # A comparison expected to take at most this long is computed in the change's handler: its results
@@ -459,12 +459,11 @@ class Controls(pn.viewable.Viewer):
         takes_theta = pn.bind(lambda m, o: METHODS[m].takes_theta or METHODS[o].takes_theta,
                               s.param.method, s.param.other)
         wide = {"sizing_mode": "stretch_width"}
-        refused = pn.bind(refused_methods, s.param.scene)  # greyed out in both method menus
         return pn.Column(
             pn.widgets.Select.from_param(s.param.scene, name="Scene", **wide),
-            Menu.from_param(s.param.method, name="Method", disabled_options=refused, **wide),
+            pn.widgets.Select.from_param(s.param.method, name="Method", **wide),
             pn.widgets.FloatSlider.from_param(s.param.theta, visible=takes_theta, **wide),
-            Menu.from_param(s.param.other, disabled_options=refused, **wide),
+            pn.widgets.Select.from_param(s.param.other, **wide),
             pn.Row(bound(pn.widgets.FloatInput, s, "h", label="Step h", description=s.param.h.doc, format="0.[000000]",
                          **wide),
                    bound(pn.widgets.FloatInput, s, "T", label="Horizon T", description=s.param.T.doc, **wide), **wide),
@@ -472,12 +471,6 @@ class Controls(pn.viewable.Viewer):
             SceneControls(study=s),
             **wide,
         )
-
-
-def refused_methods(scene):
-    """The methods the scene refuses (Method.refusal: Boris without fields, a splitting of a scene
-    that is not separable, the exact flow where there is none)."""
-    return [name for name, m in METHODS.items() if m.refusal(SCENES[scene])]
 
 
 def kind(p):

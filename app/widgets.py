@@ -1,6 +1,5 @@
-"""A widget bound to a parameter of a page's state (a Job, which says what is wrong), the message
-an emptied number box gets, and a menu whose disabled options are greyed out."""
-import panel as pn
+"""A widget bound to a parameter of a page's state (a Job, which says what is wrong), and the
+message an emptied number box gets."""
 import param
 
 from .jobs import Note
@@ -10,19 +9,6 @@ from .plotting import push
 def empty(label):
     """What a number box that was emptied says (its value in use is put back)."""
     return Note("error", f"{label} is empty: type a number (the box shows the value in use again)")
-
-
-class Menu(pn.widgets.Select):
-    """A Select of {label: value} whose disabled_options (values) reach the page as labels: BokehJS 3's
-    <option> elements carry the label as their value, which Panel's CustomSelect compares with the
-    names it is sent, so a disabled method was offered as any other."""
-
-    def _process_param_change(self, params):
-        props = super()._process_param_change(params)
-        if props.get("disabled_options") and isinstance(self.options, dict):
-            label = {v: k for k, v in self.options.items()}
-            props["disabled_options"] = [label[v] for v in props["disabled_options"]]
-        return props
 
 
 def bound(cls, obj, name, **options):

@@ -456,22 +456,6 @@ def test_picking_a_scene_opens_its_first_views_methods_and_keeps_what_was_change
     assert type(s.inputs) is study.inputs_class("damped"), "the controls show the scene put back"
 
 
-def test_the_method_menus_grey_out_what_the_scene_refuses():
-    """Boris needs fields, a splitting a separable H, the exact flow a closed form: the menus offer
-    them greyed out on a scene that refuses them (a link may still ask: refused with a message)."""
-    s = Study(scene="modulated")
-    menus = [w for w in study.Controls(study=s).__panel__().select(pn.widgets.Select)
-             if w.name in ("Method", "Compared with")]
-    assert len(menus) == 2
-    for scene in SCENES.values():
-        s.scene = scene.name
-        refused = {m for m in METHODS if METHODS[m].refusal(scene)}
-        assert all(set(w.disabled_options) == refused for w in menus), scene.name
-        assert s.method not in refused and s.other not in refused
-    s.scene = "charged"
-    assert "boris" not in menus[0].disabled_options and "leapfrog" in menus[0].disabled_options
-
-
 @pytest.mark.parametrize("change, needle", [
     ({"values": {"beta": "sin(t"}}, "beta(t)"),
     ({"h": -0.1}, "h > 0"),
