@@ -12,7 +12,18 @@ from cosymp.scenes import SCENES
 from ..plotting import SLOTS, Pair, Raster, figure, grid, note, pane, path, peaks, reset_ranges, table
 from ..study import LIVE_REFERENCE_STEPS
 from .base import Feature, FeatureView
-from .common import PORTRAIT_MARKS, color_key, comparisons, names, numbers, over_time, phase_axes, tail, verdict, zcols
+from .common import (
+    PORTRAIT_MARKS,
+    color_key,
+    comparisons,
+    names,
+    numbers,
+    over_time,
+    phase_axes,
+    tail,
+    verdict,
+    zcols,
+)
 
 NUMBERS_TEXT = "<h4>Numbers</h4><p class='doc'>From the full-resolution runs: maxima over every step.</p>"
 APART = 1e3  # two orbits whose sizes differ by more than this are drawn in portraits of their own
