@@ -333,7 +333,7 @@ def _tangent_impl(D, P, C, tk, h, zs, pt, M, TW):
     return complex_step
 
 
-def _member(D, P, C, tk, h, Z, i, z, old, zs, W, e, up, down, S, Cc, by_map, M, TW):
+def _member(D, P, C, tk, h, Z, i, z, old, zs, W, e, up, down, S, Cc, by_map, M):
     """Member i's step from Z[i] (old <- Z[i], z <- the new state) and its p_t sum (S, Cc): the
     member step (_advance), or where by_map on a linear scene the step matrix M of _tangent applied
     alone (kernels.loops.apply_map), without p_t (S, Cc returned as they came: no
@@ -351,12 +351,12 @@ def _stepped(D, P, C, tk, h, Z, i, z, old, W, e, up, down, S, Cc):
 
 
 @overload(_member, jit_options=_INLINE)
-def _member_impl(D, P, C, tk, h, Z, i, z, old, zs, W, e, up, down, S, Cc, by_map, M, TW):
+def _member_impl(D, P, C, tk, h, Z, i, z, old, zs, W, e, up, down, S, Cc, by_map, M):
     if not _scene(P).linear:
-        return lambda D, P, C, tk, h, Z, i, z, old, zs, W, e, up, down, S, Cc, by_map, M, TW: _stepped(
+        return lambda D, P, C, tk, h, Z, i, z, old, zs, W, e, up, down, S, Cc, by_map, M: _stepped(
             D, P, C, tk, h, Z, i, z, old, W, e, up, down, S, Cc)
 
-    def by_matrix(D, P, C, tk, h, Z, i, z, old, zs, W, e, up, down, S, Cc, by_map, M, TW):
+    def by_matrix(D, P, C, tk, h, Z, i, z, old, zs, W, e, up, down, S, Cc, by_map, M):
         if not by_map:
             return _stepped(D, P, C, tk, h, Z, i, z, old, W, e, up, down, S, Cc)
         apply_map(Z, i, M, old, zs, z, P, e, up, down)
@@ -466,7 +466,7 @@ def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, en
         by_map = mapped and not records and is_linear(P)
         for i in range(1, Z.shape[0]):
             status, sum_, comp = _member(D, P, C, tk, h, Z, i, z, old, zs, W, e, up, down, S[i], Cc[i],
-                                         by_map, M, TW)
+                                         by_map, M)
             if by_map:  # the step matrix's state alone: its p_t is not carried (_member)
                 if not _finite(0.0, z, P):
                     status = OVERFLOW
