@@ -110,24 +110,26 @@ class Figures:
             reset_ranges(p.fig)
 
 
-SPLIT = ("<p class='doc'>" + PORTRAIT_MARKS + " Two errors. <b>Energy</b>: |H + p_t|, 0 for the exact flow, which a structure-preserving "
-         "method keeps in a bounded band. <b>Trajectory</b>: {against}, which also counts how far along its orbit "
-         "each method has run (its phase): there a higher order wins.</p>")
+SPLIT = ("Two errors. <b>Energy</b>: |H + p_t|, 0 for the exact flow, which a structure-preserving method keeps in "
+         "a bounded band. <b>Trajectory</b>: {against}, which also counts how far along its orbit each method has "
+         "run (its phase): there a higher order wins.")
 
 
 def remark(runs):
-    """The two errors the plots split, and what the trajectory is measured against: the exact flow,
-    or a reference run for a scene without one (or nothing, when that run would be too long for a
-    live view)."""
-    if SCENES[runs.scene].has_flow:
-        return SPLIT.format(against="relative to the exact flow")
+    """How the portraits mark a run, the two errors the plots split, and what the trajectory is
+    measured against: the exact flow, or a reference run for a scene without one (or nothing, when
+    that run would be too long for a live view)."""
     against = next((e.comparison.against for e in runs.ok if e.comparison.against), None)
-    if against is None:
-        return (f"<p class='doc'>{PORTRAIT_MARKS} No closed-form flow for this scene, and its reference would take more than "
-                f"{LIVE_REFERENCE_STEPS:.0e} rk8 steps here: no trajectory error plot; the report or "
-                "<code>cosymp run</code> measure the final error.</p>")
-    return SPLIT.format(against=f"relative to a reference run, {against}, as in the report (this scene has no "
-                                "closed-form flow)")
+    if SCENES[runs.scene].has_flow:
+        errors = SPLIT.format(against="relative to the exact flow")
+    elif against is None:
+        errors = (f"No closed-form flow for this scene, and its reference would take more than "
+                  f"{LIVE_REFERENCE_STEPS:.0e} rk8 steps here: no trajectory error plot; the report or "
+                  "<code>cosymp run</code> measure the final error.")
+    else:
+        errors = SPLIT.format(against=f"relative to a reference run, {against}, as in the report (this scene has no "
+                                      "closed-form flow)")
+    return f"<p class='doc'>{PORTRAIT_MARKS} {errors}</p>"
 
 
 class OrbitsView(FeatureView):
