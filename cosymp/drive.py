@@ -140,7 +140,7 @@ class Drive:
         """One call of the fused loop from the run's current state: (status, k, in_tangent)."""
         s = self.setup
         ends = (self.t0 + self.done * self.h, self.t0 + (self.done + steps) * self.h)
-        scaled = s.scene.needs_scaling(s.P, max(abs(ends[0]), abs(ends[1])))
+        scaled = max(abs(ends[0]), abs(ends[1])) > s.scaled_beyond
         out = np.zeros((1, 3), dtype=np.int64)
         survey(s.data, s.P, NO_ROWS, self.t0, self.done, self.h, self.Z[None], self.PT[None], self._sum[None],
                self._comp[None], steps, self.every, self.want, self.width, self.acc[None], env, tb, self._G[None],

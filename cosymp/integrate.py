@@ -2,7 +2,7 @@
 import functools
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -27,17 +27,18 @@ def get_scene(name):
 def check_step(h, T):
     """Number of steps for step h up to horizon T (T/h rounded up, within 1e-9 relative, so that
     h = T/N gives N), or InputError saying what to change."""
-    h, T = as_number(h, "h"), as_number(T, "T")
-    if h <= 0:
-        raise InputError(f"h = {h} must be positive: pass a step size h > 0")
-    if T <= 0:
-        raise InputError(f"T = {T} must be positive: pass a horizon T > 0")
+    if not (type(h) is float and type(T) is float and 0.0 < h < math.inf and 0.0 < T and T / h <= MAX_STEPS):
+        # Anything but simulate's common case (two floats that pass): each check with its message.
+        h, T = as_number(h, "h"), as_number(T, "T")
+        if h <= 0:
+            raise InputError(f"h = {h} must be positive: pass a step size h > 0")
+        if T <= 0:
+            raise InputError(f"T = {T} must be positive: pass a horizon T > 0")
+        if not T / h <= MAX_STEPS:  # also a ratio that overflows to inf
+            raise InputError(f"T/h = {T / h:.3g} steps exceeds the cap of {MAX_STEPS:.0e}: "
+                             f"increase h or shorten T")
     ratio = T / h
-    if not ratio <= MAX_STEPS:  # also a ratio that overflows to inf
-        raise InputError(f"T/h = {ratio:.3g} steps exceeds the cap of {MAX_STEPS:.0e}: "
-                         f"increase h or shorten T")
-    steps = math.ceil(ratio - 1e-9 * max(1.0, ratio))
-    return max(steps, 1)
+    return max(math.ceil(ratio - 1e-9 * max(1.0, ratio)), 1)
 
 
 @dataclass
@@ -51,6 +52,14 @@ class Setup:
     P: tuple
     data: tuple
     start: np.ndarray
+    # Derived, once: |t| beyond which a run needs the scene's scaled steps (Scene.needs_scaling; inf:
+    # never), and the compiled loops simulate calls (kernel -> _entry's).
+    scaled_beyond: float = field(init=False, repr=False, compare=False)
+    loops: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def __post_init__(self):
+        limit = self.scene.kernel.scaled_beyond
+        self.scaled_beyond = math.inf if limit is None else limit(self.P)
 
     @classmethod
     def make(cls, scene, method, values=None, theta=None):
@@ -180,6 +189,7 @@ def _entry(kernel, setup, args):
         kernel(*args[:6], 0, *args[7:])
         compiled = kernel.overloads.get(tuple(kernel.typeof_pyval(a) for a in args))
         fn = _ENTRIES[key] = kernel if compiled is None else compiled.entry_point
+    setup.loops[kernel] = fn
     return fn
 
 
@@ -191,16 +201,15 @@ def simulate(setup, h, T, z0=None, stride=None, increments=False, t0=0.0, pt0=No
     MAX_RECORDED values, else the smallest stride that fits), and always the final step.
     """
     steps = check_step(h, T)
-    Z = initial_states(setup, z0)
+    Z = setup.start.copy() if z0 is None else initial_states(setup, z0)
     warm.ensure(setup)
     N, m = Z.shape
-    per_record = N * (m + 1) * (3 if increments else 1)
     if stride is None:
         stride = default_stride(steps, N, m, increments)
     elif not isinstance(stride, (int, np.integer)) or stride < 1:
         raise InputError(f"stride = {stride} must be a positive whole number")
     K = records(steps, stride)
-    if K * per_record > MAX_RECORDED:
+    if K * N * (m + 1) * (3 if increments else 1) > MAX_RECORDED:
         raise InputError(f"recording {K} states of {N} trajectories exceeds the memory cap "
                          f"({MAX_RECORDED:.0e} values): pass a larger stride")
     if N > 1 and not setup.scene.kernel.linear:
@@ -216,7 +225,7 @@ def simulate(setup, h, T, z0=None, stride=None, increments=False, t0=0.0, pt0=No
     Trec, PTrec, H, Zrec = np.empty(K), np.empty((K, N)), np.empty((K, N)), np.empty((K, N, m))
     dZrec = np.empty((K, N, m)) if increments else _none(N, m)
     t0, h = float(t0), float(h)
-    scaled = setup.scene.needs_scaling(setup.P, max(abs(t0), abs(t0 + steps * h)))
+    scaled = max(abs(t0), abs(t0 + steps * h)) > setup.scaled_beyond
     # An ensemble of a linear scene steps by one matrix per step, shared by its members; a single
     # trajectory by member steps, which cost it 1.1-3.6x less than building the step's matrix (no
     # matrix products; measured on every linear scene and family) but for Gauss's, which refine
@@ -224,7 +233,7 @@ def simulate(setup, h, T, z0=None, stride=None, increments=False, t0=0.0, pt0=No
     kernel = propagate_matrix if N > 1 else propagate_one
     args = (setup.data, setup.P, t0, h, Z, PT, steps, int(stride), Trec, Zrec, PTrec, dZrec, H, scaled,
             pt0 is None)
-    loop = _entry(kernel, setup, args)
+    loop = setup.loops.get(kernel) or _entry(kernel, setup, args)
     start = time.perf_counter()
     status, done = loop(*args)
     wall = time.perf_counter() - start
