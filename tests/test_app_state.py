@@ -104,6 +104,23 @@ def test_picking_a_scene_opens_its_first_view_which_shows_the_claim(scene):
     assert ("trajectory error is the larger" in text) == (errors[0] > errors[1])
     if errors[0] > errors[1]:
         assert band.max() < 0.01 * abs(kept.comparison.run.pt[0, 0]), "the energy error is small: the rest is phase"
+    assert "other values" not in info._look.object, "the page shows the first view the header describes"
+
+
+def test_a_link_naming_the_scene_alone_says_the_header_s_first_view_is_not_shown_and_links_to_it():
+    """?scene=charged opens the paper's values (B0 0.05, h 0.001, T 20), while the header describes
+    the first view (B0 1, h 0.15, T 300): it says the page shows other values, and its link opens the
+    first view (on the tab shown)."""
+    s = Study(scene="charged", view="gauges")
+    info = study.SceneInfo(study=s)
+    info.__panel__()
+    text = info._look.object
+    assert "the link opened this page on other values" in text
+    href = html.unescape(text.split("href='")[1].split("'")[0])
+    values, bad = parse_items(dict(parse_qsl(href[1:])), URL_NAMES)
+    assert not bad and values == {**first_state(SCENES["charged"]), "view": "gauges"}
+    opened = Study(**values)
+    assert {k: getattr(opened, k) for k in first_state(SCENES["charged"])} == first_state(SCENES["charged"])
 
 
 def test_the_final_error_without_an_exact_flow_is_the_reports_and_the_verdict_says_what_it_means():
@@ -777,8 +794,12 @@ def test_gauge_study_gives_every_gauge_and_invariant_transported_observables():
     assert len(diff) <= POINTS and diff.max() < 1e-9, "round-off, drawn as its per-bin bound"
     for kind in ("per-gauge", "transported"):  # chi(t) only: A, the orbit and Pi unchanged
         assert np.all(gauges.gauge_series(g.results, kind, "diff")["lorenz"][1] == plotting.FLOOR)
-    text = drawn(gauges.GaugeView(s, g)).floor.object
+    view = drawn(gauges.GaugeView(s, g))
+    text = view.floor.object
     assert "lorenz: χ depends on t only" in text and "exactly 0, drawn at the bottom" in text
+    diffs = {view.sources[kind, "diff", "coulomb"] for kind in ("per-gauge", "transported")}
+    figs = [p.object for p in view.body.select(pn.pane.Bokeh) if {r.data_source for r in p.object.renderers} & diffs]
+    assert len(figs) == 2 and figs[0].y_range is figs[1].y_range, "the two difference plots share their axis"
     transported = float(re.search(r"(\S+) transported \(round-off", text).group(1))
     assert transported == float(f"{max(y.max() for _, y in gauges.gauge_series(g.results, 'transported', 'diff').values()):.1e}")
     assert transported < 1e-13

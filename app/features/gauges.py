@@ -116,7 +116,8 @@ def floor_text(largest):
     """What the difference plots show: their largest values, and the gauges whose difference is
     exactly 0 (drawn at the log axis' floor)."""
     same = [name for name, x in gauged_scene().gauges.items() if name != "original" and not np.any(x.C)]
-    text = (f"Largest difference from the original gauge: {largest.get('per-gauge', 0.0):.1e} per gauge (the "
+    text = (f"The two difference plots share their axis. Largest difference from the original gauge: "
+            f"{largest.get('per-gauge', 0.0):.1e} per gauge (the "
             f"method's error differs between gauges), {largest.get('transported', 0.0):.1e} transported (round-off:"
             " G_χ maps the run exactly).")
     if same:
@@ -132,11 +133,13 @@ class GaugeView(FeatureView):
         g = self.state
         gauges = gauged_scene().gauges
         self.sources = {}
-        columns = []
+        columns, differences = [], []
         for kind, heading, text in KINDS:
             figs = []
             for quantity, (title, xl, yl) in QUANTITIES.items():
                 fig = figure(title, xl, yl, logy=quantity == "diff")
+                if quantity == "diff":
+                    differences.append(fig)
                 for name in gauges:
                     if quantity == "diff" and name == "original":
                         continue
@@ -147,6 +150,9 @@ class GaugeView(FeatureView):
             # One line of heading and one of text each: the two columns' plots start level.
             columns.append(pn.Column(note(f"<h4>{heading}</h4><p class='doc'>{html.escape(text)}</p>"), *figs,
                                      sizing_mode="stretch_width"))
+        # The two difference plots on one axis: the transported runs' round-off then lies flat, orders of
+        # magnitude below the per-gauge differences (on an axis of its own it filled the plot).
+        differences[1].y_range = differences[0].y_range
         rows = [pn.Row(note(f"<b>{name}</b>", width=90, sizing_mode=None),
                        equation(f"$\\chi = {x.chi}$", width=230),
                        note(f"<span class='doc'>condition: {html.escape(x.condition)}</span>"
