@@ -13,6 +13,7 @@ import html
 import math
 from concurrent.futures import ThreadPoolExecutor
 from functools import cache
+from urllib.parse import urlencode
 
 import panel as pn
 import param
@@ -30,7 +31,7 @@ from cosymp.study import with_reference
 
 from .jobs import Job, Note
 from .plotting import equation, note, push
-from .presets import HARD, PAPER, PRESETS, URL_NAMES, first_state, rounded
+from .presets import HARD, PAPER, PRESETS, URL_NAMES, first_state, query_items, rounded
 from .warmup import first_view
 from .widgets import bound, empty
 
@@ -670,8 +671,18 @@ class SceneInfo(pn.viewable.Viewer):
         self._head.object = f"<h2>{html.escape(s.title)}</h2><p>{html.escape(s.summary)}</p>"
         self._show_equations()
         self._look.object = (f"<p class='lookfor'><b>Look for:</b> {html.escape(s.look_for)}<br><b>First view</b> "
-                             f"(what the Scene menu opens): {html.escape(first(s).doc)}</p>"
+                             f"({self._first_view_shown(s)}): {html.escape(first(s).doc)}</p>"
                              + (f"<ul class='notes'>{notes}</ul>" if notes else ""))
+
+    def _first_view_shown(self, scene):
+        """Whether the page opened on the scene's first view, which the box describes: a link naming
+        the scene alone opens the paper's values (Study), and the box read as the page's state."""
+        first_view = first_state(scene)
+        if all(rounded(getattr(self.study, k)) == rounded(v) for k, v in first_view.items()):
+            return "what the Scene menu opens"
+        link = "?" + urlencode(query_items({**first_view, "view": self.study.view}, URL_NAMES))
+        return (f"what the Scene menu opens; the link opened this page on other values: "
+                f"<a href='{html.escape(link)}'>open the first view</a>")
 
     def _show_equations(self):
         """The scene's equations as its values make them (the beta(t) chosen, say)."""
