@@ -1,6 +1,7 @@
 """The served page (app/main.py) composed in-process, without a server or a browser."""
 import asyncio
 import datetime
+import importlib
 import inspect
 import math
 import pathlib
@@ -874,3 +875,43 @@ def test_a_page_without_settings_gets_the_spare_session_and_a_link_with_settings
         assert await ask(plain) != "discarded-id"
 
     asyncio.run(scenario())
+
+
+def test_a_components_parameters_are_writable_for_a_moment_as_panel_makes_them_and_flagged_again_after():
+    """app/page.editable stands in for Panel's edit_readonly wherever a page's changes call it, and
+    does what Panel's does: inside, every parameter can be set (read-only and constant ones too);
+    after, also after an error, the flags are as Panel's leaves them (as before, where nothing was
+    set; param copies a parameter to the instance when it is first set, and that copy keeps the
+    flags it had then, with either). It only touches the flagged parameters."""
+    page.adjust_panel()
+    for name in page.EDITS_READONLY:
+        assert importlib.import_module(name).edit_readonly is page.editable, name
+    source = inspect.getsource(page.PANEL_EDIT_READONLY)
+    assert "p.readonly = False" in source and "p.constant = False" in source, "Panel's edit_readonly changed"
+
+    def used(edit, set_flagged, fail):
+        widget = pn.widgets.IntSlider(start=0, end=10, value=3)
+
+        def flags():
+            return {n: (p.readonly, p.constant) for n, p in widget.param.objects("existing").items()}
+
+        before = flags()
+        flagged = [n for n, (readonly, constant) in before.items() if readonly or constant]
+        assert flagged, "a widget with read-only or constant parameters"
+        try:
+            with edit(widget):
+                assert not any(readonly or constant for readonly, constant in flags().values())
+                if set_flagged:
+                    widget.param.update(**{n: getattr(widget, n) for n in flagged})
+                if fail:
+                    raise RuntimeError
+        except RuntimeError:
+            pass
+        return before, flags()
+
+    for set_flagged in (False, True):
+        for fail in (False, True):
+            before, after = used(page.editable, set_flagged, fail)
+            assert after == used(page.PANEL_EDIT_READONLY, set_flagged, fail)[1]
+            if not set_flagged:
+                assert after == before
