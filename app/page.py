@@ -163,9 +163,9 @@ def editable(parameterized):
     """Panel's edit_readonly (a component's parameters writable while Panel sets them from the page
     or its own bookkeeping), touching only the parameters that are read-only or constant. Panel's
     sets both flags of every parameter, and back, and param handles each set as a change of that
-    parameter (1.3 us here): 0.2 ms for a widget (33 parameters, 2 of them flagged; 0.04 ms here),
-    and a scene change enters it about 60 times (py-spy and cProfile of the server: 12 ms of the
-    change's 55)."""
+    parameter (1.3 us here): 0.2 ms for a widget (33 parameters, 2 of them flagged; 0.04 ms here).
+    Counted in the server, the sidebar's sliders alone entered Panel's 626 times in 18 scene changes
+    and a page's load (152 ms); a scene change's handling takes about 45 ms there."""
     flagged = [(p, p.readonly, p.constant) for p in parameterized.param.objects("existing").values()
                if p.readonly or p.constant]
     for p, _, _ in flagged:
