@@ -14,10 +14,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .diagnostics import (
-    distance,
+    errors_over_time,
     loop_action,
     nearby_states,
-    norm,
     paper_symplectic_form,
     ring_states,
     separation_omega,
@@ -40,6 +39,8 @@ class Comparison:
     cloud, cloud_area: the carried loop and its enclosed area over its initial area.
     error: the relative error |z - z_ref| / |z_ref| against the exact flow where the scene has one,
         or against a reference run given to `with_reference`; else None. against: which of them.
+    orbit_error: |z - z_ref| relative to the largest |z_ref| so far, the orbit's size
+        (diagnostics.errors_over_time): what the trajectory error plots show.
     Pi: mechanical momentum of the trajectory where the scene defines one, else None.
     """
 
@@ -56,6 +57,7 @@ class Comparison:
     Pi: np.ndarray
     cpu_s: float
     against: str = None
+    orbit_error: np.ndarray = None
 
     @property
     def summary(self):
@@ -102,25 +104,23 @@ def compare(setup, h, T, delta=1e-4, cloud_points=0, cloud_radius=0.05, stride=N
         cloud = simulate(setup, h, T, z0=ring_states(base, cloud_radius, cloud_points), stride=every)
         area = loop_action(cloud)
         area = area / area[0]
-    error = None
+    error = orbit_error = None
     if setup.scene.has_flow:
         exact = simulate(Setup.make(setup.scene, "exact", setup.values), h, run.steps * h, z0=base[None],
                          stride=run.stride)
-        z_exact = exact.z[: len(run.t), 0]
-        error = distance(run.z[:, 0], z_exact) / np.maximum(norm(z_exact), np.finfo(float).tiny)
+        error, orbit_error = errors_over_time(run.z[:, 0], exact.z[: len(run.t), 0])
     Pi = setup.scene.momentum(setup.P, run.t, run.q[:, 0], run.p[:, 0])
     return Comparison(setup, run, figures[:, 0], figures[:, 1], paper_symplectic_form(run),
                       figures[:, 2], separation_omega(run) / delta ** 2, cloud, area, error, Pi,
-                      time.thread_time() - start, "the exact flow" if error is not None else None)
+                      time.thread_time() - start, "the exact flow" if error is not None else None, orbit_error)
 
 
 def with_reference(comparison, states, h, label):
     """The comparison with its error measured against a reference run's states at every multiple
     of h (`reference.reference_states`): for the scenes without an exact flow."""
     run = comparison.run
-    z_ref = states[np.rint(run.t / h).astype(np.int64)]
-    error = distance(run.z[:, 0], z_ref) / np.maximum(norm(z_ref), np.finfo(float).tiny)
-    return dataclasses.replace(comparison, error=error, against=label)
+    error, orbit_error = errors_over_time(run.z[:, 0], states[np.rint(run.t / h).astype(np.int64)])
+    return dataclasses.replace(comparison, error=error, orbit_error=orbit_error, against=label)
 
 
 def compare_until_failure(setup, h, T, **options):

@@ -100,7 +100,7 @@ def test_picking_a_scene_opens_its_first_view_which_shows_the_claim(scene):
     assert drift[-tenth:].max() > 1.5 * drift[:tenth].max(), "it drifts"
     text = common.verdict(s.results)
     assert f"{lost.label} drifts, {kept.label} does not" in text
-    errors = [float(np.nanmax(e.comparison.error)) for e in (kept, lost)]
+    errors = [float(np.nanmax(e.comparison.orbit_error)) for e in (kept, lost)]
     assert ("trajectory error is the larger" in text) == (errors[0] > errors[1])
     if errors[0] > errors[1]:
         assert band.max() < 0.01 * abs(kept.comparison.run.pt[0, 0]), "the energy error is small: the rest is phase"
@@ -135,10 +135,10 @@ def test_the_final_error_without_an_exact_flow_is_the_reports_and_the_verdict_sa
         assert common.numbers(s.results)[e.label][3] == plotting.fmt(e.final_error)
     midpoint, rk4 = s.results.entries
     assert midpoint.final_error > 10 * rk4.final_error
-    largest = [float(np.nanmax(e.comparison.error)) for e in (midpoint, rk4)]
+    largest = [float(np.nanmax(e.comparison.orbit_error)) for e in (midpoint, rk4)]
     assert (f"{midpoint.label}'s trajectory error is the larger, though (up to {largest[0]:.2g} against "
-            f"{largest[1]:.2g} over the run)") in common.verdict(s.results)
-    assert "relative to a reference run, rk8 at h" in orbits.remark(s.results)
+            f"{largest[1]:.2g} of the orbit's size over the run)") in common.verdict(s.results)
+    assert "against a reference run, rk8 at h" in orbits.remark(s.results)
     figs = shown_figures(drawn(orbits.OrbitsView(s)))
     assert plotted(figs.error).size > 0
     for e in s.results.entries:
@@ -377,7 +377,7 @@ def test_scenes_of_one_shape_share_the_portraits_relabelled_with_fresh_ranges():
     fig = figs.portraits[0][1]
     ranges, tags = (fig.x_range, fig.y_range), list(fig.tags)
     assert [c.code for c in fig.js_property_callbacks["change:tags"]] == [plotting.RESET_RANGES]
-    assert len(figs.grid.objects) == 3 and "relative to the exact flow" in orbits.remark(s.results)
+    assert len(figs.grid.objects) == 3 and "against the exact flow" in orbits.remark(s.results)
     title = figs.error.fig.title.text
     for scene in ("decaying", "modulated", "kapitza"):
         tags = list(fig.tags)

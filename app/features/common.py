@@ -167,13 +167,13 @@ def phase_note(kept, lost, bounded):
     error, not the phase along the orbit."""
     if kept.final_error is None or lost.final_error is None:  # a run stopped early, or no reference
         return ""
-    a, b = (float(np.nanmax(e.comparison.error)) for e in (kept, lost))
+    a, b = (float(np.nanmax(e.comparison.orbit_error)) for e in (kept, lost))
     if not a > b:
         return ""
     orders = [order(e) for e in (kept, lost)]
     p = html.escape(kept.label)
-    return (f" {p}'s trajectory error is the larger, though (up to {a:.2g} against {b:.2g} over the run): of order "
-            f"{orders[0]} against {orders[1]}, {p} "
+    return (f" {p}'s trajectory error is the larger, though (up to {a:.2g} against {b:.2g} of the orbit's size "
+            f"over the run): of order {orders[0]} against {orders[1]}, {p} "
             + ("runs out of phase along its orbit sooner at this h. What structure preservation bounds is the energy "
                "error, not the phase." if bounded else "follows the trajectory less closely at this h."))
 

@@ -7,6 +7,7 @@ import numpy as np
 import pandas as pd
 import panel as pn
 
+from cosymp.diagnostics import ORBIT_ERROR
 from cosymp.scenes import SCENES
 
 from ..plotting import SLOTS, Pair, Raster, figure, grid, note, pane, path, peaks, reset_ranges, table
@@ -69,7 +70,7 @@ class Figures:
         # three plots a row on a 1280-pixel projector (longer ones were cut: "energy error: max |H + p_t|
         # per bi"); the axes say what is drawn.
         self.energy = Pair(figure("energy error |H + p_t|", "t", "max |H + p_t| per bin", logy=True))
-        self.error = Pair(figure("trajectory error", "t", "|z − z_ref| / |z_ref|", logy=True))
+        self.error = Pair(figure("trajectory error", "t", ORBIT_ERROR, logy=True))
         figs = [f for _, f, _ in self.portraits] + [self.energy.fig, self.error.fig]
         self.grid = grid(*[pane(f) for f in figs], ncols=3 if len(figs) in (3, 6) else 2)
 
@@ -100,8 +101,8 @@ class Figures:
         # the log axis over a dozen empty decades.
         self.energy.set({slot: peaks(c.run.t[1:], np.abs(c.run.H_ext[1:, 0])) for slot, c in cs.items()})
         self.error.colors(names(runs))
-        self.error.set(over_time(runs, lambda c: (c.run.t[1:], c.error[1:]) if c.error is not None else (None, None),
-                                 logy=True))  # 0 at t = 0
+        self.error.set(over_time(runs, lambda c: (c.run.t[1:], c.orbit_error[1:]) if c.error is not None
+                                 else (None, None), logy=True))  # 0 at t = 0
 
     def reset(self):
         for _, fig, _ in self.portraits:
@@ -111,8 +112,10 @@ class Figures:
 
 
 SPLIT = ("Two errors. <b>Energy</b>: |H + p_t|, 0 for the exact flow, which a structure-preserving method keeps in "
-         "a bounded band. <b>Trajectory</b>: {against}, which also counts how far along its orbit each method has "
-         "run (its phase): there a higher order wins.")
+         "a bounded band. <b>Trajectory</b>: |z − z_ref| {against}, which also counts how far along its orbit each "
+         "method has run (its phase): there a higher order wins. It is divided by the orbit's size so far, the "
+         "largest |z_ref| up to t (|z_ref| itself passes near 0 on an orbit stretched as the damped oscillator's); "
+         "the table's final relative error divides by |z_ref| at T.")
 
 
 def remark(runs):
@@ -121,13 +124,13 @@ def remark(runs):
     that run would be too long for a live view)."""
     against = next((e.comparison.against for e in runs.ok if e.comparison.against), None)
     if SCENES[runs.scene].has_flow:
-        errors = SPLIT.format(against="relative to the exact flow")
+        errors = SPLIT.format(against="against the exact flow")
     elif against is None:
         errors = (f"No closed-form flow for this scene, and its reference would take more than "
                   f"{LIVE_REFERENCE_STEPS:.0e} rk8 steps here: no trajectory error plot; the report or "
                   "<code>cosymp run</code> measure the final error.")
     else:
-        errors = SPLIT.format(against=f"relative to a reference run, {against}, as in the report (this scene has no "
+        errors = SPLIT.format(against=f"against a reference run, {against}, as in the report (this scene has no "
                                       "closed-form flow)")
     return f"<p class='doc'>{PORTRAIT_MARKS} {errors}</p>"
 

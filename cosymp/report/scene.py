@@ -3,6 +3,7 @@ import shlex
 
 import numpy as np
 
+from ..diagnostics import ORBIT_ERROR
 from ..reference import reference_states
 from ..study import compare_until_failure, with_reference
 from . import Figure, Report, Section, Series, Table
@@ -120,8 +121,8 @@ def _orbit_figures(scene, runs):
                        parametric=True)]
     figs.append(Figure("Extended Hamiltonian H + p_t", "t", "H + p_t", _series(runs, lambda c: (c.run.t, c.run.H_ext[:, 0]))))
     if all(c.error is not None for _, c in runs):
-        figs.append(Figure(f"Relative error against {runs[0][1].against}", "t", "|z − z_ref| / |z_ref|",
-                           _series(runs, lambda c: (c.run.t, c.error)), logy=True))
+        figs.append(Figure(f"Trajectory error against {runs[0][1].against}, relative to the orbit's size", "t",
+                           ORBIT_ERROR, _series(runs, lambda c: (c.run.t, c.orbit_error)), logy=True))
     return figs
 
 
