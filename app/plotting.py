@@ -216,7 +216,10 @@ class Curves:
     decades apart (one method blowing up, or a log quantity). `show(data, names)` takes the
     unreduced {slot: (t, y)} and the methods' names, and draws the series (envelopes). The log
     axis' figure of a linear series is built when first needed: most never need it, and a figure
-    costs the server 15-35 ms when its tab is first shown."""
+    costs the server 15-35 ms when its tab is first shown. Once built, both figures stay in the page
+    and the inactive one is hidden: a figure taken out of the document and put back comes back with
+    the start and end its auto ranges last had, which pins them (the next scene's data, t to 25, was
+    drawn on the previous scene's axes, t to 1050, and looked like an empty plot)."""
 
     def __init__(self, title, x_label, y_label, log=False):
         self.always_log = log
@@ -225,7 +228,8 @@ class Curves:
         self.linear = None if log else Pair(figure(title, x_label, y_label))
         self.log = None
         self.active = self.logarithmic() if log else self.linear
-        self.panel = pn.Column(pane(self.active.fig), sizing_mode="stretch_width", margin=0)
+        self.panes = {self.active: pane(self.active.fig)}
+        self.panel = pn.Column(self.panes[self.active], sizing_mode="stretch_width", margin=0)
 
     @property
     def sources(self):
@@ -255,7 +259,11 @@ class Curves:
         active = self.logarithmic() if self.always_log or apart else self.linear
         if active is not self.active:
             self.active = active
-            self.panel.objects = [pane(active.fig)]
+            if active not in self.panes:
+                self.panes[active] = pane(active.fig)
+                self.panel.append(self.panes[active])
+            for shown, p in self.panes.items():
+                p.visible = shown is active
         active.colors(names)
         floor = zero_floor([y for _, y in data.values()]) if active is self.log else FLOOR
         active.set({slot: series(t, y, logy=active is self.log, floor=floor) for slot, (t, y) in data.items()})

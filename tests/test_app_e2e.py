@@ -663,3 +663,44 @@ def test_only_the_shown_tab_s_contents_are_in_the_document(page):
         assert [labels.index(label)] == [active for active, _, _ in tabs], (label, tabs)
     page.shot("tabs-back-to-orbits")
     page.check()
+
+
+RANGES_JS = """(title) => {
+    // [x start, x end, data x min, data x max] of the figures titled `title` (Bokeh's models).
+    const out = [];
+    for (const doc of Bokeh.documents) for (const m of doc.all_models) {
+        if (!m.title || m.title.text !== title || !m.x_range) continue;
+        const xs = [];
+        for (const r of m.renderers) {
+            const d = r.data_source && r.data_source.data;
+            const x = d && (d instanceof Map ? d.get("x") : d.x);
+            if (x) for (const v of x) if (Number.isFinite(v)) xs.push(v);
+        }
+        if (xs.length) out.push([m.x_range.start, m.x_range.end, Math.min(...xs), Math.max(...xs)]);
+    }
+    return out;
+}"""
+
+
+def test_a_figure_shown_again_follows_its_new_data(page):
+    """Structure's paper's det estimator is drawn on a log axis for charged and on a linear one for
+    modulated and kapitza. Its linear figure, taken out of the page for charged and put back for
+    kapitza, came back with modulated's axis, t to 1050, pinned: kapitza's data (t to 25) sat in a
+    corner at 1e-12 of a 1e-10 axis, an empty-looking plot. Both figures now stay in the page."""
+    title = "paper's estimator: det[X¹ … X²ⁿ⁺¹]"
+    page.open()
+    page.page.wait_for_selector(TABLE_ROW)
+    scene = page.page.locator("select").first
+    for tab, name in (("Structure", None), (None, "charged"), ("Orbits", None), (None, "kapitza"), ("Structure", None)):
+        if tab:
+            page.page.locator(".bk-tab", has_text=tab).first.click()
+        else:
+            scene.select_option(label=SCENES[name].title)
+            expect(page.page.locator("h2:visible").first).to_contain_text(SCENES[name].title.split(" (")[0])
+        page.page.wait_for_timeout(3000)
+    page.page.wait_for_function(f"() => ({RANGES_JS})({json.dumps(title)}).some(([a, b, lo, hi]) => hi > 24 && hi <= 25)")
+    page.shot("structure-kapitza-after-charged")
+    for start, end, lo, hi in page.page.evaluate(RANGES_JS, title):
+        if 24 < hi <= 25:  # kapitza's T: the figure shown
+            assert start <= lo and hi <= end < 2 * hi, (start, end, lo, hi)
+    page.check()
