@@ -224,8 +224,14 @@ def test_the_verdict_of_a_run_that_stopped_quotes_what_it_reached():
     text = common.verdict(s.results)
     assert "nan" not in text and "round-off" not in text and "rk4's |H + p_t| (at most 0.00087)" in text
     stop = min(e.comparison.run.t[-1] for e in s.results.entries)
-    assert stop < s.T and all(e.failure for e in s.results.entries)
-    assert f"Up to t = {stop:.6g}, where symplectic-euler and rk4 stopped" in text and "T = 7500" not in text
+    assert stop < s.T and all(e.failure and e.comparison.run.t[-1] == stop for e in s.results.entries)
+    assert f"Up to t = {stop:.6g}, where rk4 and symplectic-euler stopped (see the messages)" in text
+    assert "T = 7500" not in text
+    s2 = Study(scene="charged", values={"beta": "exp(t)"}, T=50.0)  # each its own stop (both were put at 7.606)
+    midpoint, rk4 = (e.comparison.run.t[-1] for e in s2.results.entries)
+    assert rk4 == pytest.approx(7.606) and midpoint == pytest.approx(44.11)
+    assert ("Up to t = 7.606, where rk4 stopped (midpoint stopped at t = 44.11; see the messages)"
+            in common.verdict(s2.results))
     assert "rk4's higher order (4 against 1)" in text
 
 
@@ -261,15 +267,24 @@ def test_what_is_drawn_fits_an_axis_the_page_can_span():
     assert np.abs(shown).max() <= plotting.LINEAR_MAX and np.isfinite(1.1 * (shown.max() - shown.min()))
 
 
-def test_the_verdict_says_where_the_symplectic_methods_run_stopped():
-    """'Kapitza: Newton fails': midpoint's Newton iteration fails at t = 11, RK4 runs to T = 100; the
-    band RK4 leaves is measured over midpoint's 11 time units, and the verdict says so."""
+def test_the_verdict_says_where_the_symplectic_methods_run_stopped_and_calls_no_band_wider_than_the_energy_bounded():
+    """'Kapitza: Newton fails': midpoint's Newton iteration fails at t = 11, RK4 runs to T = 100. Up to
+    there midpoint's |H + p_t| reaches 1.8e4, 39 times the largest |H| of its run (a nu^2 = 480): the
+    verdict said "rk4 drifts, midpoint does not" of that band. A band of at least RESOLVED |H| is no
+    band: the verdict says the method does not follow the energy at this h."""
     s = Study(scene="kapitza", method="midpoint", other="rk4", h=0.5, T=100.0, values={"q0": 3.0, "a": 0.3, "nu": 40.0})
     midpoint, rk4 = s.results.entries
     assert midpoint.failure and not rk4.failure and midpoint.comparison.run.t[-1] == pytest.approx(11.0)
     text = common.verdict(s.results)
-    assert "rk4's |H + p_t| leaves midpoint's" in text
-    assert "midpoint's run stopped at t = 11 (see the message): its band is measured up to there." in text
+    run = midpoint.comparison.run
+    band, energy = np.nanmax(np.abs(run.H_ext[:, 0])), np.nanmax(np.abs(run.H[:, 0]))
+    assert band > 30 * energy and energy == pytest.approx(0.3 * 40 ** 2, rel=0.01)
+    assert text.startswith("<p class='verdict'>Up to t = 11, where midpoint stopped (see the message), ")
+    assert (f"midpoint's |H + p_t| reaches {band:.2g}, {band / energy:.2g}× the largest |H| of its run "
+            f"({energy:.2g}): at this h it does not follow the solution's energy") in text
+    assert "does not." not in text and "bounded band" not in text
+    s.h = 0.01  # 1.3 % of |H|: a band again
+    assert "rk4's |H + p_t| (at most 0.12) stays below midpoint's bounded band (6.4)" in common.verdict(s.results)
 
 
 def test_the_verdict_says_a_higher_order_only_where_it_is_one():

@@ -73,16 +73,23 @@ def verdict(runs):
     # 20 records had that 0 as its whole first tenth (a band "5.1e+304× wider" at its end).
     first, last = tenths(kept_err)
     growth = last / max(first, np.finfo(float).tiny)
-    stopped = [e.label for e in (ke, le) if e.failure]
+    stopped = sorted((e.comparison.run.t[-1], e.label) for e in (ke, le) if e.failure)
+    first = [label for t, label in stopped if t == stopped[0][0]] if stopped else []
     until = ((f"Up to T = {runs.T:g}" if reached(lr, runs.T) else f"Up to t = {lr.t[-1]:.6g}") if not stopped else
-             f"Up to t = {min(kr.t[-1], lr.t[-1]):.6g}, where {html.escape(' and '.join(stopped))} stopped (see the "
-             "message)")
+             f"Up to t = {stopped[0][0]:.6g}, where {html.escape(' and '.join(first))} stopped ("
+             + "".join(f"{html.escape(label)} stopped at t = {t:.6g}; " for t, label in stopped[len(first):])
+             + f"see the message{'s' if len(stopped) > 1 else ''})")
     rounding = within_roundoff(kr)
     bounded = growth <= BAND_GROWTH or rounding
     if not bounded:
         h_first, h_last = tenths(np.abs(kr.H[:, 0]))
         if h_last > BAND_GROWTH * h_first:
             return growing_verdict(until, ke, le, h_last / h_first)
+    energy = float(np.nanmax(np.abs(kr.H[:, 0])))
+    if band >= RESOLVED * energy:
+        return (f"<p class='verdict'>{until}, {html.escape(p)}'s |H + p_t| reaches {band:.2g}, {band / energy:.2g}× the "
+                f"largest |H| of its run ({energy:.2g}): at this h it does not follow the solution's energy, and a band "
+                "that wide bounds nothing; reduce h before comparing the methods.</p>")
     what = (f"{html.escape(p)}'s band ({band:.2g}, round-off: within {ROUNDOFF:g} ε |H| √N of its {kr.steps} "
             "steps)" if rounding else
             f"{html.escape(p)}'s bounded band ({band:.2g})" if bounded else
@@ -155,8 +162,7 @@ def growing_verdict(until, kept, lost, grown):
         text += f"{off[0]} no longer follows the solution's energy at this h, {n if off[0] == p else p} does."
     else:
         text += f"both follow the growing solution, {p if ends[0] <= ends[1] else n} the more closely."
-    return text + (f" {p}'s run stopped at t = {kept.comparison.run.t[-1]:.6g} (see the message)." if kept.failure
-                   else "") + f"{phase_note(kept, lost, False)}</p>"
+    return text + f"{phase_note(kept, lost, False)}</p>"
 
 
 def phase_note(kept, lost, bounded):
