@@ -83,6 +83,27 @@ def test_every_scene_opens_on_a_map_that_computes(scene):
     assert (m.result.status == "ok").all(), m.result.failures()
 
 
+def test_no_axis_varies_a_parameter_the_other_values_leave_without_effect():
+    """Charged with a constant beta(t): its map varied w x eps, which then shape nothing (the sidebar
+    greys them out); every cell was one colour, "at most one e-fold over T in every cell", over axes
+    that say nothing. Now the axes and their menus leave them out, and a typed beta(t) B0 too."""
+    s = Study(scene="charged")
+    m = StabilityMap(s)
+    assert (m.x, m.y) == ("w", "eps") and {"w", "eps", "B0"} <= set(m.param.x.objects)
+    s.values = {"beta": "constant"}
+    assert {m.x, m.y}.isdisjoint({"w", "eps"}) and m.x != m.y
+    assert {"w", "eps"}.isdisjoint(m.param.x.objects) and "B0" in m.param.y.objects
+    first = (m.x, m.y)
+    m.nx = m.ny = 3
+    m.start()
+    grid = m.result.values[m.measure]
+    assert grid.shape == (3, 3) and (m.result.status == "ok").all() and np.ptp(grid) > 0, "the axes act"
+    s.values = {"beta": "1 + 0.1*t"}
+    assert "B0" not in m.param.x.objects and {m.x, m.y}.isdisjoint({"w", "eps", "B0"})
+    s.values = {"beta": "paper"}
+    assert {"w", "eps", "B0"} <= set(m.param.x.objects) and (m.x, m.y) == first, "axes that act are kept"
+
+
 def test_a_scene_without_a_map_entry_gets_h_against_its_first_parameter():
     scene = SCENES["kapitza"]
     bare = dataclasses.replace(scene, name="bare", map_axes=None)

@@ -46,13 +46,16 @@ SIGNIFICANT = 4  # a cell opened in Orbits carries its values to this many signi
 UNIFORM = 2.0  # a map whose values lie within this factor is said to be nearly one colour (uniform_text)
 
 
-def map_axes(scene):
+def map_axes(scene, unused=()):
     """The Stability map's first axes for a scene, (name, start, stop, log) for x and y: those it
     declares (Scene.map_axes), else h on a log axis around the scene's step by its first parameter
-    that is not an initial condition, over its slider range."""
-    if scene.map_axes is not None:
+    that is not an initial condition, over its slider range. Never a parameter the other values
+    leave without effect (`unused`: charged's ε and ω with a constant β(t), which mapped to one colour
+    over axes the sidebar greys out)."""
+    if scene.map_axes is not None and not {axis[0] for axis in scene.map_axes} & set(unused):
         return scene.map_axes
-    p = next(p for p in scene.params if not p.initial and not p.choices and not isinstance(p.default, str))
+    p = next(p for p in scene.params if not p.initial and not p.choices and not isinstance(p.default, str)
+             and p.name not in unused)
     return ("h", scene.h / 4, 8 * scene.h, True), (p.name, *soft_range(p), False)
 
 
@@ -129,6 +132,7 @@ class StabilityMap(Job):
         self.job = None
         self._on_scene()
         study.param.watch(self._on_scene, ["scene", "method"])
+        study.param.watch(self._on_values, ["values"])
 
     def say(self, note_):
         self.study.say(note_)
@@ -140,13 +144,36 @@ class StabilityMap(Job):
             self.discard()
             self.job = None
             self.param.update(result=None, setting="")
-        names = sweep.variables(self.study.scene_obj, METHODS[self.study.method])
-        self.param.x.objects = self.param.y.objects = names
+        names = self._names()
         if events and all(e.name == "method" for e in events) and {self.x, self.y} <= set(names):
             return
-        (xn, x0, x1, xl), (yn, y0, y1, yl) = map_axes(self.study.scene_obj)
-        self.param.update(x=xn, x_start=x0, x_stop=x1, x_log=xl, y=yn, y_start=y0, y_stop=y1, y_log=yl,
-                          measure=first_measure(self.study.scene_obj))
+        self._first_axes()
+        self.param.update(measure=first_measure(self.study.scene_obj))
+
+    def _unused(self):
+        vals = self.study.checked_values()
+        return self.study.scene_obj.unused(vals) if vals is not None else ()
+
+    def _names(self):
+        """The names an axis may vary: the method's and scene's, less those without effect."""
+        unused = self._unused()
+        names = [n for n in sweep.variables(self.study.scene_obj, METHODS[self.study.method]) if n not in unused]
+        self.param.x.objects = self.param.y.objects = names
+        return names
+
+    def _first_axes(self):
+        (xn, x0, x1, xl), (yn, y0, y1, yl) = map_axes(self.study.scene_obj, self._unused())
+        self.param.update(x=xn, x_start=x0, x_stop=x1, x_log=xl, y=yn, y_start=y0, y_stop=y1, y_log=yl)
+
+    def _on_values(self, event):
+        """A value that leaves an axis without effect (β(t) made constant under an ε axis) gives the
+        scene's first axes among those that act; the map shown then goes, as after a scene change."""
+        if {self.x, self.y} <= set(self._names()):
+            return
+        self.discard()
+        self.job = None
+        self.param.update(result=None, setting="")
+        self._first_axes()
 
     def _inputs(self):
         s = self.study
