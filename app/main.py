@@ -86,6 +86,7 @@ class App(param.Parameterized):
                 self.states[f.name].param.update(**values)
             except (ValueError, TypeError) as err:
                 bad.append(str(err))
+            bad += [f"{f.url[k]}={v}" for k, v in values.items() if getattr(self.states[f.name], k) != v]  # refused
             if bad:
                 self._pending.append(Note("error", f"the link's {', '.join(bad)} could not be applied: showing the "
                                                    "defaults"))

@@ -208,6 +208,9 @@ def test_a_link_s_unknown_names_and_markup_are_said_as_text_never_run(page):
     assert "<img src=x onerror=window.pwned=1>" in bad_view.inner_text()
     assert page.page.evaluate("window.pwned") is None
     assert page.page.locator(".notyf__toast img").count() == 0
+    page.page.goto(page.base + "?T_long=-5", wait_until="load")  # kept silently, and written back into the link
+    page.page.locator(".notyf__toast", has_text="the link's T_long=-5 could not be applied").first.wait_for()
+    assert "T_long=-5" not in page.settled_url()
 
 
 def test_a_bad_beta_is_a_notification_and_the_last_good_state_stays(page):

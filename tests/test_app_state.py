@@ -454,6 +454,24 @@ def test_an_emptied_number_box_gets_the_value_in_use_back_and_says_what_to_do():
     assert s.results is good and gamma.slider.value == s.inputs.gamma
 
 
+def test_a_long_horizon_that_cannot_run_is_refused_when_typed_and_the_box_keeps_the_value_in_use():
+    """0, -5 and 1e15 (4e15 steps at h = 0.25) were kept in the box and the link and refused only on
+    Start, in words that named the sidebar's T."""
+    s = Study()
+    lr = longrun.LongRun(s)
+    box = next(w for w in drawn(longrun.LongRunView(s, lr)).__panel__().select(pn.widgets.FloatInput)
+               if w.label == lr.param.T_long.label)
+    before = lr.T_long
+    for typed, why in ((0.0, "must be positive"), (-5.0, "must be positive"), (1e15, "exceeds the cap")):
+        s.message = None
+        box.value = typed
+        assert (lr.T_long, box.value) == (before, before), typed
+        assert s.message.level == "error" and s.message.text.startswith(f"Long horizon T = {typed:g} refused: ")
+        assert why in s.message.text and s.message.text.endswith("(the box shows the value in use again)")
+    box.value = 3000.0
+    assert lr.T_long == 3000.0
+
+
 def test_discarded_controls_do_not_keep_the_study_alive():
     """Panel 1.9's EditableFloatSlider stays in a global registry for ever, and kept every closed
     session's Study (and its results) with it; the controls now used are collected."""
@@ -946,7 +964,8 @@ def test_a_result_the_server_remembers_is_computed_ahead_once_not_while_running_
     assert lr.remember_ahead() and lr.status.startswith("done: 20000 steps") and memory.BUDGET.used == 0
     again = longrun.LongRun(Study(scene="damped"), T_long=2000.0)
     assert not again.remember_ahead() and again.run is None, "remembered: nothing to compute"
-    lr.T_long = 1e8
+    s.param.update(T=10.0, h=1.5e-5)  # T_long 2000: 1.3e8 steps, over the cap (typed, it is refused at once)
+    s.message = None
     assert not lr.remember_ahead() and s.message is None, "refused inputs: nothing, and nothing said"
     assert not Study().remember_ahead(), "a result no page recalls (KEEP = 0) is not computed ahead"
 
@@ -973,16 +992,19 @@ def test_a_long_run_says_when_the_sidebar_asks_for_another_run_than_the_one_show
     s.values = {}
     assert lr.since() == "", "asked for the run shown again"
     lr.T_long = 1e9
+    assert lr.T_long == 2000.0 and "Long horizon T = 1e+09 refused" in s.message.text, "refused when typed"
+    s.param.update(T=10.0, h=1.5e-5)  # the sidebar's h makes it 1.3e8 steps (its live views 6.7e5)
     assert "refused" in lr.since() and "cap" in view.since.object, "a run it would refuse is said, with why"
-    lr.T_long = 2000.0
+    s.param.update(T=50.0, h=0.1)
     lr.running = True  # as while a run goes on: a horizon typed then is not the one it runs
     lr.T_long = 3000.0
     assert "T = 3000" in lr.since() and "cancel this run, then press Start" in view.since.object
     lr.running = False
     lr.request()  # asked for: it runs next, nothing to say meanwhile
     assert lr.since() == "" and lr.data and "T = 3000" in lr.setting
-    lr.T_long = 1e9
+    s.param.update(T=10.0, h=1.5e-5)
     lr.start()  # refused: the run shown is still T = 3000's, and a later change is said
+    s.param.update(T=50.0, h=0.1)
     lr.T_long = 4000.0
     assert "T = 4000" in lr.since() and "T = 3000" in lr.setting
 

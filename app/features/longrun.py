@@ -80,6 +80,19 @@ class LongRun(Job):
         self._ran = None  # the key (`_key`) of the run shown
         self._asked = False  # a run was asked for and has not started: it replaces what is shown
         study.param.watch(self._on_scene, ["scene"])
+        self.param.watch(self._check_horizon, ["T_long"])
+
+    def _check_horizon(self, event):
+        """A horizon typed or linked is checked at once, not on Start: one that is not a positive
+        number within the step cap at the sidebar's h is refused with what to change, and the box and
+        the link keep the value in use (0, -5 and 1e15 were kept, written into the link, and refused
+        only on Start, as if the sidebar's T were wrong)."""
+        try:
+            check_step(self.study.h, event.new)
+        except InputError as err:
+            self.say(Note("error", f"Long horizon T = {event.new:g} refused: {err} (the box shows the value in use "
+                                   "again)"))
+            self.T_long = event.old
 
     def _on_scene(self, event):
         """Another scene: the run under way stops and the old scene's data goes (the view starts a
