@@ -16,6 +16,8 @@ import param
 from panel.io.state import set_curdoc
 
 from cosymp.errors import InputError, RunError
+from cosymp.methods import METHODS
+from cosymp.scenes import SCENES
 
 from .features import FEATURES
 from .jobs import FAILURES, Job, Note, failure_text
@@ -127,6 +129,9 @@ class App(param.Parameterized):
         values, bad = parse_items(query, URL_NAMES)
         if values.get("view", "compare") not in {f.name for f in FEATURES}:
             bad.append(f"view={values.pop('view')}")
+        for name, known in (("scene", SCENES), ("method", METHODS), ("other", METHODS)):
+            if name in values and values[name] not in known:  # param's words named its own class
+                bad.append(f"{URL_NAMES[name]}={values.pop(name)} (not one of {', '.join(known)})")
         try:
             study = Study(**values)
         except (ValueError, TypeError, InputError) as err:

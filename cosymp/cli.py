@@ -386,7 +386,8 @@ def _methods(out):
     for m in METHODS.values():
         order = "order 2 at theta = 1/2, else 1" if m.takes_theta else (
             "exact" if m.name == "exact" else f"order {m.order}")
-        out.write(f"{m.name}: {m.title} ({order}; preserves: {m.preserves})\n  {m.doc}\n")
+        preserves = m.preserves if m.preserves_at(0.0) == m.preserves else f"{m.preserves} at theta = 1/2, else none"
+        out.write(f"{m.name}: {m.title} ({order}; preserves: {preserves})\n  {m.doc}\n")
 
 
 def main(argv=None, out=None, err=None):

@@ -208,6 +208,8 @@ def test_a_link_s_unknown_names_and_markup_are_said_as_text_never_run(page):
     assert "<img src=x onerror=window.pwned=1>" in bad_view.inner_text()
     assert page.page.evaluate("window.pwned") is None
     assert page.page.locator(".notyf__toast img").count() == 0
+    page.page.goto(page.base + "?scene=nosuch", wait_until="load")  # said in param's words: "Selector parameter 'Study.scene'"
+    page.page.locator(".notyf__toast", has_text=f"scene=nosuch (not one of {', '.join(SCENES)})").first.wait_for()
     page.page.goto(page.base + "?T_long=-5", wait_until="load")  # kept silently, and written back into the link
     page.page.locator(".notyf__toast", has_text="the link's T_long=-5 could not be applied").first.wait_for()
     assert "T_long=-5" not in page.settled_url()

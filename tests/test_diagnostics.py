@@ -129,3 +129,16 @@ def test_trajectory_error_relative_to_the_orbits_size_is_the_midpoint_rules_phas
         assert 0.8 < largest[-1] / (T * h ** 2 * W ** 3 / 12) < 1.25
     order = np.polyfit(np.log([0.1, 0.05, 0.025]), np.log(largest), 1)[0]
     assert order == pytest.approx(2, abs=0.02)
+
+
+def test_a_carried_loops_polygon_loses_area_as_one_over_n_squared_on_a_nonlinear_scene():
+    """Kapitza's first view (gauss4, h 0.01, T 25): the loop's points are carried symplectically, but
+    the flow bends the loop between them, so the polygon through them loses area as 1/N^2 (the
+    Cloud tab's caption quotes these two figures)."""
+    from app.features.cloud import CLOUD_TEXT
+    from cosymp.study import compare
+
+    deficits = [1 - compare(setup("kapitza", "gauss4"), 0.01, 25.0, cloud_points=n).cloud_area.min() for n in (64, 256)]
+    assert deficits[0] / deficits[1] == pytest.approx(16, rel=0.05)
+    quoted = [f"{d:.1e}".replace("e-0", "e-") for d in deficits]
+    assert f"1 − {quoted[0]} with 64 points, 1 − {quoted[1]} with 256" in CLOUD_TEXT

@@ -12,7 +12,11 @@ from .structure import time_plots, update_plots
 
 CLOUD_TEXT = ("<h4>Phase-space cloud</h4><p class='doc'>A loop of initial states (radius 0.05 around the "
               "initial condition, first coordinate pair) carried by each method (A left, B right), drawn at "
-              "t = 0 (light) and at T/4, T/2, 3T/4 and T (dark) over the trajectory (grey).</p>")
+              "t = 0 (light) and at T/4, T/2, 3T/4 and T (dark) over the trajectory (grey). Its area is the "
+              "polygon's through the loop's points: a symplectic method keeps it exactly on a linear scene; on a "
+              "nonlinear one the flow bends the loop between its points, and the polygon loses area as 1/N² in "
+              "its N points for every method (gauss4 on Kapitza's first view: 1 − 1.7e-4 with 64 points, "
+              "1 − 1.0e-5 with 256), while the tangent-map checks (Structure) stay at round-off.</p>")
 
 
 def closed(q, p):
