@@ -709,3 +709,29 @@ def test_a_figure_shown_again_follows_its_new_data(page):
         if 24 < hi <= 25:  # kapitza's T: the figure shown
             assert start <= lo and hi <= end < 2 * hi, (start, end, lo, hi)
     page.check()
+
+
+PLAYER_JS = """() => { for (const d of Bokeh.documents) for (const m of d.all_models)
+    if (m.constructor && m.constructor.__name__ === 'Player') return [m.value, m.interval, m.direction]; }"""
+
+
+def test_a_speed_picked_while_playing_changes_the_rate_at_once(page):
+    """BokehJS's player reads its interval when it starts: a speed picked while playing changed
+    nothing until pause and play (90 and 91.5 time units in 3 s at 20 and 5 frames/s)."""
+    page.open(query(view="play"))
+    speed = page.page.locator("select").filter(has=page.page.locator("option", has_text="5 frames/s")).first
+    speed.select_option(label="5 frames/s")
+    page.page.wait_for_function(f"() => ({PLAYER_JS})()[1] === 200")
+    page.page.locator(".play").first.click()
+
+    def rate():
+        first = page.page.evaluate(PLAYER_JS)[0]
+        page.page.wait_for_timeout(2000)
+        return (page.page.evaluate(PLAYER_JS)[0] - first) / 2
+
+    slow = rate()
+    speed.select_option(label="20 frames/s")
+    page.page.wait_for_timeout(300)
+    fast = rate()
+    assert 3 <= slow <= 6 and fast > 2 * slow, (slow, fast)
+    page.check()

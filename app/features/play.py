@@ -34,6 +34,11 @@ class Playback(param.Parameterized):
         """Nothing runs in the background."""
 
 
+RESTART_JS = "const d = cb_obj.direction; if (d !== 0) { cb_obj.direction = 0; cb_obj.direction = d; }"
+"""A new speed while playing restarts the player's timer (BokehJS's player reads its interval when it
+starts playing: a speed picked meanwhile changed nothing until pause and play)."""
+
+
 def traced(x, y, fraction):
     """The part of an orbit up to `fraction` of the run (at most TRACE_POINTS points), and its end."""
     k = int(fraction * (len(x) - 1)) if len(x) else 0
@@ -67,6 +72,7 @@ class PlayView(FeatureView):
         player.param.watch(lambda e: setattr(pb, "frame", e.new), "value")
         pb.param.watch(lambda e: e.new != player.value and setattr(player, "value", e.new), "frame")
         pb.param.watch(lambda e: setattr(player, "interval", int(1000 / e.new)), "fps")
+        player.jscallback(interval=RESTART_JS)
         self.follow(self.study, "results")
         pb.param.watch(self._on_frame, "frame")
         return pn.Column(
