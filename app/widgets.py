@@ -30,9 +30,8 @@ class ShownWidget:
     def __init__(self, cls, obj, name, visible, **options):
         self.obj, self.name, self.visible = obj, name, visible
         self.selector = isinstance(obj.param[name], param.Selector)
-        bounds = getattr(obj.param[name], "bounds", None)
-        if bounds is not None:
-            options = {"start": bounds[0], "end": bounds[1], **options}
+        # A bounded parameter's box gets no start and end: BokehJS put a value typed beyond them back
+        # without a word (the map's 1000 cells became 30 again); the parameter refuses it, said (_write).
         self.widget = cls(**{"label": obj.param[name].label, **self._state(), **options})
         self._syncing = False
         self.stale = False  # the parameter changed while the tab was hidden
@@ -56,7 +55,16 @@ class ShownWidget:
             self.sync()
             self.obj.say(empty(self.widget.label))
             return
-        setattr(self.obj, self.name, list(event.new) if isinstance(event.new, list) else event.new)
+        try:
+            setattr(self.obj, self.name, list(event.new) if isinstance(event.new, list) else event.new)
+        except ValueError:  # beyond the parameter's bounds
+            bounds = getattr(self.obj.param[self.name], "bounds", None)
+            if bounds is None:
+                raise
+            self.sync()
+            lo, hi = bounds
+            self.obj.say(Note("error", f"{self.widget.label} = {event.new} is outside {lo}…{hi}: type a value "
+                                       "within them (the box shows the value in use again)"))
 
     def _follow(self, *events):
         if self.visible():
