@@ -3,6 +3,8 @@ orbits beneath in light grey, the same for both: in the methods' colours, A's ma
 revolutions built up into what looked like an orbit already traced, and B's dashes were lost), the
 carried loop moves, and a cursor marks the time on H~ and on the loop's area.
 A new frame sends only the traced part, the loop and the cursors' positions."""
+from functools import partial
+
 import numpy as np
 import panel as pn
 import param
@@ -32,11 +34,6 @@ class Playback(param.Parameterized):
 
     def release(self):
         """Nothing runs in the background."""
-
-
-RESTART_JS = "const d = cb_obj.direction; if (d !== 0) { cb_obj.direction = 0; cb_obj.direction = d; }"
-"""A new speed while playing restarts the player's timer (BokehJS's player reads its interval when it
-starts playing: a speed picked meanwhile changed nothing until pause and play)."""
 
 
 def traced(x, y, fraction):
@@ -71,8 +68,7 @@ class PlayView(FeatureView):
                                    interval=int(1000 / pb.fps), show_value=False, show_loop_controls=False, width=420)
         player.param.watch(lambda e: setattr(pb, "frame", e.new), "value")
         pb.param.watch(lambda e: e.new != player.value and setattr(player, "value", e.new), "frame")
-        pb.param.watch(lambda e: setattr(player, "interval", int(1000 / e.new)), "fps")
-        player.jscallback(interval=RESTART_JS)
+        pb.param.watch(partial(self._speed, player), "fps")
         self.follow(self.study, "results")
         pb.param.watch(self._on_frame, "frame")
         return pn.Column(
@@ -81,6 +77,17 @@ class PlayView(FeatureView):
             grid(pane(self.orbit_fig), pane(self.loop.fig)),
             grid(*[p.panel for p in self.plots.values()]),
             sizing_mode="stretch_width")
+
+    @staticmethod
+    def _speed(player, event):
+        """The player's interval; while it plays, it is paused and played again in the next message:
+        BokehJS's player reads its interval when it starts playing (a speed picked meanwhile changed
+        nothing until pause and play)."""
+        player.interval = int(1000 / event.new)
+        direction = player.direction
+        if direction:
+            player.direction = 0
+            pn.state.curdoc.add_next_tick_callback(lambda: setattr(player, "direction", direction))
 
     def _on_frame(self, event):
         if self.visible and self._layout is not None and not self._stale:
