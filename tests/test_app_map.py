@@ -106,6 +106,11 @@ def test_no_axis_varies_a_parameter_the_other_values_leave_without_effect():
     assert "B0" not in m.param.x.objects and {m.x, m.y}.isdisjoint({"w", "eps", "B0"})
     s.values = {"beta": "paper"}
     assert {"w", "eps", "B0"} <= set(m.param.x.objects) and (m.x, m.y) == first, "axes that act are kept"
+    sent = []
+    m.param.watch(sent.append, "x", what="objects")
+    s.values = {"eps": 5.0}
+    s.values = {"eps": 6.0}
+    assert sent == [], "a value that changes no axis's choices sends the menus nothing"
 
 
 def test_a_scene_without_a_map_entry_gets_h_against_its_first_parameter():

@@ -74,10 +74,10 @@ def verdict(runs):
     first, last = tenths(kept_err)
     growth = last / max(first, np.finfo(float).tiny)
     stopped = sorted((e.comparison.run.t[-1], e.label) for e in (ke, le) if e.failure)
-    first = [label for t, label in stopped if t == stopped[0][0]] if stopped else []
+    earliest = [label for t, label in stopped if t == stopped[0][0]] if stopped else []
     until = ((f"Up to T = {runs.T:g}" if reached(lr, runs.T) else f"Up to t = {lr.t[-1]:.6g}") if not stopped else
-             f"Up to t = {stopped[0][0]:.6g}, where {html.escape(' and '.join(first))} stopped ("
-             + "".join(f"{html.escape(label)} stopped at t = {t:.6g}; " for t, label in stopped[len(first):])
+             f"Up to t = {stopped[0][0]:.6g}, where {html.escape(' and '.join(earliest))} stopped ("
+             + "".join(f"{html.escape(label)} stopped at t = {t:.6g}; " for t, label in stopped[len(earliest):])
              + f"see the message{'s' if len(stopped) > 1 else ''})")
     rounding = within_roundoff(kr)
     bounded = growth <= BAND_GROWTH or rounding

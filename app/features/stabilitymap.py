@@ -155,10 +155,13 @@ class StabilityMap(Job):
         return self.study.scene_obj.unused(vals) if vals is not None else ()
 
     def _names(self):
-        """The names an axis may vary: the method's and scene's, less those without effect."""
+        """The names an axis may vary: the method's and scene's, less those without effect. Given to the
+        axis menus only when they change: each assignment is a message to a page showing the map, and
+        this runs on every value change (a slider's drag)."""
         unused = self._unused()
         names = [n for n in sweep.variables(self.study.scene_obj, METHODS[self.study.method]) if n not in unused]
-        self.param.x.objects = self.param.y.objects = names
+        if names != self.param.x.objects:
+            self.param.x.objects = self.param.y.objects = names
         return names
 
     def _first_axes(self):
