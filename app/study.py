@@ -309,9 +309,6 @@ class Study(Job):
         step longer than T (a single step far past T, judged as a run to T) or more steps than the live
         views take."""
         steps = check_step(self.h, self.T)
-        if self.h > self.T:
-            raise InputError(f"h = {self.h:g} is longer than T = {self.T:g}: a run takes whole steps of h, so "
-                             "choose h <= T or a longer T")
         if steps > LIVE_MAX_STEPS:
             raise InputError(f"T/h = {steps:.3g} steps is beyond the live views' limit of "
                              f"{LIVE_MAX_STEPS:.0e}: increase h, shorten T, or use the Long run view")

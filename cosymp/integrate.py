@@ -26,8 +26,9 @@ def get_scene(name):
 
 def check_step(h, T):
     """Number of steps for step h up to horizon T (T/h rounded up, within 1e-9 relative, so that
-    h = T/N gives N), or InputError saying what to change."""
-    if not (type(h) is float and type(T) is float and 0.0 < h < math.inf and 0.0 < T and T / h <= MAX_STEPS):
+    h = T/N gives N), or InputError saying what to change (h longer than T included: one step
+    would end far past it)."""
+    if not (type(h) is float and type(T) is float and 0.0 < h <= T and T / h <= MAX_STEPS):
         # Anything but simulate's common case (two floats that pass): each check with its message.
         h, T = as_number(h, "h"), as_number(T, "T")
         if h <= 0:
@@ -37,6 +38,9 @@ def check_step(h, T):
         if not T / h <= MAX_STEPS:  # also a ratio that overflows to inf
             raise InputError(f"T/h = {T / h:.3g} steps exceeds the cap of {MAX_STEPS:.0e}: "
                              f"increase h or shorten T")
+        if T / h < 1 - 1e-9:
+            raise InputError(f"h = {h:g} is longer than the horizon T = {T:g}: its one step would end at "
+                             f"t = {h:g}; choose h <= T or a longer T")
     ratio = T / h
     return max(math.ceil(ratio - 1e-9 * max(1.0, ratio)), 1)
 
@@ -271,8 +275,9 @@ def exact_flow(exact, z, pt, t0, t1, shortest):
 
 def _exact_overflows(setup, t, h):
     """Whether the scene's exact flow itself leaves floating-point range by t (then no step size
-    helps), carried in steps of at most t (exact_flow) down to h where one fails."""
-    if not setup.scene.has_flow or setup.method.requires == "flow":
+    helps), carried in steps of at most t (exact_flow) down to h where one fails. Not at t = 0:
+    a run that fails in its first step started from a finite state."""
+    if t <= 0 or not setup.scene.has_flow or setup.method.requires == "flow":
         return False
     try:
         z, _ = exact_flow(Setup.make(setup.scene, "exact", setup.values), None, None, 0.0, t, h)

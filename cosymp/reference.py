@@ -12,21 +12,34 @@ from .kernels.loops import energies, vector_field
 REFERENCE_FRACTION = 0.02
 
 
-def check_reference(setup, T):
-    """InputError if the fine rk8 reference to T (scenes without an exact flow) passes the step cap."""
-    fine_steps = T / (REFERENCE_FRACTION * setup.scene.time_scale)
-    if not setup.scene.has_flow and not fine_steps <= MAX_STEPS:
-        raise InputError(f"the reference for this run would take {fine_steps:.3g} steps of rk8 (at most "
-                         f"{REFERENCE_FRACTION:g} of the scene's time scale each), over the cap of "
-                         f"{MAX_STEPS:.0e}: shorten T")
+def check_reference(setup, h, T):
+    """InputError, before anything runs, if the fine rk8 reference of a run of setup with step h
+    to T (scenes without an exact flow) passes the step cap."""
+    fine = fine_steps(setup, h, T)
+    if not fine <= MAX_STEPS:
+        count = f"{fine:.3g}" if math.isfinite(fine) else "more than 1e+300"
+        raise InputError(f"the reference for this run would take {count} steps of rk8 (at most "
+                         f"{REFERENCE_FRACTION:g} of the scene's time scale and half of h each), over the cap "
+                         f"of {MAX_STEPS:.0e}: shorten T, or skip the error at T (--no-error)")
+
+
+def refinement(setup, h):
+    """k, the reference's rk8 steps per step h: each no larger than 2% of the scene's time scale,
+    and k even and at least 2. The reference is never the run itself (rk8 at h was measured against
+    itself, an error of 0), and its check at twice its step ends on the same final time."""
+    ratio = h / (REFERENCE_FRACTION * setup.scene.time_scale)
+    if not ratio <= MAX_STEPS:  # the reference is refused: no whole number for a ratio that overflows
+        return math.inf
+    k = max(2, math.ceil(ratio))
+    return k + k % 2
 
 
 def fine_steps(setup, h, T):
     """How many rk8 steps the reference of a run of setup with step h to T takes (0 with an exact
-    flow): a whole number k of them per step h, each no larger than 2% of the scene's time scale."""
+    flow): refinement(setup, h) of them per step h."""
     if setup.scene.has_flow:
         return 0
-    return check_step(h, T) * max(1, math.ceil(h / (REFERENCE_FRACTION * setup.scene.time_scale)))
+    return check_step(h, T) * refinement(setup, h)
 
 
 def reference_states(setup, h, T, z0=None):
@@ -35,38 +48,40 @@ def reference_states(setup, h, T, z0=None):
     states (steps + 1, 2n), its step h/k no larger than 2% of the scene's time scale; label says
     which reference it is. For the scenes without an exact flow."""
     steps = check_step(h, T)
-    check_reference(setup, steps * h)
-    k = fine_steps(setup, h, T) // steps
+    check_reference(setup, h, T)
+    k = refinement(setup, h)
     run = simulate(Setup.make(setup.scene, "rk8", setup.values), h / k, steps * h, z0=z0, stride=k)
-    return run.z[:, 0], f"rk8 at h/{k}" if k > 1 else "rk8 at h"
+    return run.z[:, 0], f"rk8 at h/{k}"
 
 
 def reference_final(setup, h, T, z0=None, uncertainty=True):
     """(z at the run's final time steps*h, uncertainty) for a run of setup with step h to T.
 
-    Exact flow: one exact step over the whole horizon, split where a step fails down to steps of h
+    Exact flow: one exact step over the whole horizon, split where a step fails down to 2^-30 of it
     (integrate.exact_flow: the damped oscillator's one-step map passes floating point at γ T = 709,
-    its state only at γ T = 1420), uncertainty 0; RunError where the state itself leaves floating
-    point. Otherwise rk8 with a step h/k no larger than 2% of the scene's time scale, compared with
-    rk8 at twice that step for the uncertainty (NaN when not asked for).
+    its state only at γ T = 1420; a step of h could fail where the state did not), uncertainty 0;
+    RunError where the state itself leaves floating point. Otherwise rk8 at the step h/k of `refinement`; its uncertainty (NaN when not asked for)
+    is Richardson's estimate of its error from rk8 at twice that step, |z_k - z_(k/2)| / (2^8 - 1),
+    or the round-off of its steps, eps sqrt(steps) |z|, where that is larger.
     """
     steps = check_step(h, T)
     t_final = steps * h
     if setup.scene.has_flow:
         exact = Setup.make(setup.scene, "exact", setup.values)
         try:
-            z, _ = exact_flow(exact, initial_states(setup, z0), None, 0.0, t_final, h)
+            z, _ = exact_flow(exact, initial_states(setup, z0), None, 0.0, t_final, t_final * 2.0 ** -30)
         except RunError as e:
             raise RunError(f"the reference, the exact flow, leaves floating-point range at t ≈ {e.time:.4g} "
                            f"(|z| > 1.8e308): shorten T below it", e.time, e.step) from None
         return z, np.zeros(z.shape[0])
-    check_reference(setup, t_final)
-    k = fine_steps(setup, h, T) // steps
+    check_reference(setup, h, T)
+    k = refinement(setup, h)
     fine = Setup.make(setup.scene, "rk8", setup.values)
     a = simulate(fine, h / k, t_final, z0=z0, stride=steps * k)
-    if uncertainty and steps * k % 2 == 0:
+    if uncertainty:
         b = simulate(fine, 2 * h / k, t_final, z0=z0, stride=steps * k // 2)
-        spread = norm(a.z[-1] - b.z[-1])
+        rounding = np.finfo(float).eps * math.sqrt(steps * k) * norm(a.z[-1])
+        spread = np.maximum(norm(a.z[-1] - b.z[-1]) / (2 ** 8 - 1), rounding)
     else:
         spread = np.full(a.z.shape[1], np.nan)
     return a.z[-1], spread

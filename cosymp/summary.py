@@ -10,7 +10,7 @@ from .drive import CHUNK, Drive
 from .integrate import check_step, simulate
 from .kernels.loops import energies
 from .kernels.survey import ACC, ENV
-from .reference import reference_final
+from .reference import check_reference, reference_final, refinement
 
 
 def transport(traj, target):
@@ -67,6 +67,8 @@ def run_summary(setup, h, T, transport_from=None, with_error=True, progress=None
     the reference, wall time (wall_s: the compiled run with its diagnostics)."""
     steps = check_step(h, T)
     setup.scene.check_horizon(setup.values, steps * h)
+    if with_error:
+        check_reference(setup, h, T)
     start = time.perf_counter()
     if transport_from:
         final, fig, wall = _transported_run(setup, h, steps, setup.with_values(gauge=transport_from), progress)
@@ -108,7 +110,7 @@ def run_summary(setup, h, T, transport_from=None, with_error=True, progress=None
         zr, spread = reference_final(setup, h, T)
         scale = max(float(norm(zr[0])), np.finfo(float).tiny)  # relative, as the app, reports and sweeps give it
         out["error_final"] = float(distance(z, zr[0])) / scale
-        out["reference"] = "exact flow" if setup.scene.has_flow else "rk8 (fine fixed step)"
+        out["reference"] = "exact flow" if setup.scene.has_flow else f"rk8 at h/{refinement(setup, h)}"
         out["reference_uncertainty"] = float(spread[0]) / scale
     out["wall_total_s"] = time.perf_counter() - start
     return out

@@ -208,7 +208,7 @@ def plan(scene, method, axes, measures=("growth",), values=None, theta=None, h=N
         check_horizon(TT)
         setup.scene.check_horizon(setup.values, steps * hh)
         if "error_final" in measures:
-            check_reference(setup, steps * hh)
+            check_reference(setup, hh, TT)
     return p
 
 

@@ -211,3 +211,48 @@ def test_long_commands_compile_what_they_need_first_with_a_line_each(argv, tmp_p
     assert len(lines) > 2 and all(" done] " in line for line in lines[2:]) and "cosymp:" not in out
     code, out, err = run_cli(*argv, "--theta", "0.3")
     assert code == 2 and err.count("\n") == 1 and "theta" in err and "compiling" not in err
+
+
+def _strict(text):
+    """json.loads that refuses NaN and Infinity, which are not JSON."""
+    def refuse(name):
+        raise ValueError(f"{name} in the output")
+    return json.loads(text, parse_constant=refuse)
+
+
+@pytest.mark.parametrize("scene, h, T", [("modulated", "0.02", "10"), ("charged", "0.001", "2.001")])
+def test_rk8_is_never_measured_against_itself(scene, h, T):
+    """Where h is already below the reference's 2% of the time scale, rk8 at h was its own
+    reference (an error of exactly 0). Its error is now measured against rk8 at h/2 or finer,
+    and the reference's own uncertainty is a number (it was NaN, not JSON, at an odd step count)."""
+    code, out, err = run_cli("run", scene, "--method", "rk8", "--h", h, "--T", T, "--json")
+    assert code == 0, err
+    res = _strict(out)
+    assert res["reference"].startswith("rk8 at h/") and res["reference"] != "rk8 at h/1"
+    assert 0 < res["error_final"] < 1e-12
+    assert 0 < res["reference_uncertainty"] < 1e-13
+
+
+def test_a_reference_over_the_step_cap_is_refused_before_the_run(monkeypatch):
+    import cosymp.summary
+
+    def must_not_run(*args, **kwargs):
+        raise AssertionError("the run started before its reference was checked")
+
+    monkeypatch.setattr(cosymp.summary, "Drive", must_not_run)
+    code, out, err = run_cli("run", "kapitza", "--method", "midpoint", "--h", "0.05", "--T", "3e5")
+    assert code == 2 and not out
+    assert "over the cap" in err and "--no-error" in err and err.count("\n") == 1
+
+
+@pytest.mark.parametrize("argv, flags", [
+    (["report", "paper", "--h", "0.1"], "--h applies"),
+    (["report", "paper", "--method", "rk4", "--set", "gamma=1"], "--method, --set apply"),
+    (["report", "damped", "--quick", "--no-work-precision"], "--quick, --no-work-precision apply"),
+])
+def test_a_report_refuses_the_options_it_would_ignore(argv, flags, tmp_path):
+    """The paper report ran its own values whatever --h, --method or --set said, and a scene's report
+    has no long runs for --quick to leave out: each was ignored without a word."""
+    code, out, err = run_cli(*argv, "-o", str(tmp_path / "r.html"))
+    assert code == 2 and not out and err.startswith(f"cosymp: {flags}") and err.count("\n") == 1
+    assert not (tmp_path / "r.html").exists()

@@ -219,7 +219,7 @@ def overrides(draw, scene):
     return out
 
 
-SANE = st.tuples(st.floats(1e-3, 2.0), st.floats(0.01, 2000.0)).map(lambda ht: ("sane", ht[0], ht[0] * ht[1]))
+SANE = st.tuples(st.floats(1e-3, 2.0), st.floats(1.0, 2000.0)).map(lambda ht: ("sane", ht[0], ht[0] * ht[1]))
 BAD_NUMBER = st.one_of(st.sampled_from([0.0, -0.0, 0, math.nan, math.inf, -math.inf]),
                        st.floats(max_value=-1e-300, allow_nan=False))
 ODD_STEP = st.sampled_from([None, "0.1", "1", b"1", [0.1], 10 ** 400, 2 ** 1100, 1j, object])
@@ -229,6 +229,7 @@ HOSTILE_STEP_AND_HORIZON = st.sampled_from([
     st.tuples(BAD_NUMBER, BAD_NUMBER).map(lambda p: ("bad h and T", *p)),
     st.tuples(st.floats(5e-324, 1e-3), st.floats(1.01e8, 1e300)).map(lambda p: ("over cap", p[0], p[0] * p[1])),
     st.tuples(st.floats(5e-324, 1e-200), st.floats(1e100, 1e308)).map(lambda p: ("tiny h, huge T", *p)),
+    st.tuples(st.floats(1e-3, 1e300), st.floats(1e-9, 0.999)).map(lambda p: ("h past T", p[0], p[0] * p[1])),
     st.tuples(ODD_STEP, st.floats(0.01, 10.0)).map(lambda p: ("odd h", *p)),
     st.tuples(st.floats(1e-3, 2.0), ODD_STEP).map(lambda p: ("odd T", *p)),
     # NumPy's numbers are numbers: taken like Python's
@@ -690,6 +691,30 @@ def test_cli_single_huge_step_is_not_told_to_increase_h():
     'increase h or shorten T'."""
     code, _out, err = run_cli(["run", "kapitza", "--h", "1e300", "--T", "1"])
     assert code in (2, 3) and "increase h" not in err, err
+
+
+def test_a_step_longer_than_the_horizon_is_refused_not_run_far_past_it():
+    """T/h rounds up to one step: h = 1e5 to T = 1 ran to t = 1e5, and h = 1e308 was blamed on T."""
+    for h in ("1e5", "1e308"):
+        code, out, err = run_cli(["run", "decaying", "--h", h, "--T", "1"])
+        assert code == 2 and not out and "longer than the horizon T = 1" in err and "choose h <= T or a longer T" in err, err
+    assert check_step(1.0 + 1e-12, 1.0) == 1
+
+
+def test_a_failure_in_the_first_step_is_not_blamed_on_a_zero_step():
+    """The damped scene's first step of h = 1e20 overflows: asking whether the exact flow overflows
+    by t = 0 ran it with h = 0 and printed 'h = 0.0 must be positive'."""
+    code, _out, err = run_cli(["run", "damped", "--h", "1e20", "--T", "1e20"])
+    assert code == 3 and "overflow in step 1 (from t = 0)" in err and "must be positive" not in err, err
+
+
+def test_the_exact_reference_is_split_below_h_where_its_one_step_map_overflows():
+    """gamma = 10, one midpoint step of h = 100: the exact flow's one-step map over 100 overflows
+    (e^(gamma h) > 1.8e308) long before its state does, at gamma t = 709 (t = 70.9); split only down
+    to h, the reference said it left floating point at t = 0."""
+    code, _out, err = run_cli(["run", "damped", "--set", "gamma=10", "--h", "100", "--T", "100"])
+    found = re.search(r"leaves floating-point range at t ≈ ([0-9.]+)", err)
+    assert code == 3 and found and 70 < float(found[1]) < 75, err
 
 
 def test_a_run_that_starts_out_of_range_is_refused_before_it_runs():
