@@ -352,3 +352,35 @@ def test_a_scene_change_drops_the_rows_of_the_old_scene():
     assert m.rows and m.setting.startswith("decaying")
     s.scene = "damped"
     assert not m.rows and not m.setting and m.job is None
+
+
+def test_the_tab_says_when_the_sidebar_or_its_controls_ask_for_another_measurement_than_the_one_shown():
+    """A measurement starts on its Start button, not on each change: after the sidebar's values or the
+    horizon changed, the plots kept the old rows while only the status line named them (the Long run
+    and the Stability map said so). Now the tab says what is asked for, until it is measured."""
+    s = Study(scene="decaying")
+    both = views.Measurements(s)
+    m = both.measure
+    m.param.update(methods=["rk4"], peers=False, T=2.0)
+    m.start()
+    view = views.WorkPrecisionView(s, both)
+    s.view = view.NAME
+    view.__panel__()
+    view.shown()
+    since = view.since[m]
+    assert m.rows and m.since() == "" and since.object == ""
+    s.theta = 0.3
+    assert m.since() == "", "rk4 takes no θ: its rows are what is asked for"
+    m.T = 3.0
+    assert "Computed before the latest changes" in since.object and "T = 3" in since.object
+    assert "press Start work–precision" in since.object and view.since[both.long].object == ""
+    m.T = 2.0
+    assert since.object == ""
+    s.values = {"lam": 0.5}
+    assert "lam = 0.5" in m.since()
+    s.view = "compare"
+    s.values = {}
+    assert since.object != "", "a hidden tab's text follows when it is shown"
+    s.view = view.NAME
+    view.shown()
+    assert since.object == ""

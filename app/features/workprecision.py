@@ -6,6 +6,7 @@ import dataclasses
 import datetime
 import html
 import math
+from functools import partial
 
 import numpy as np
 import pandas as pd
@@ -23,7 +24,7 @@ from cosymp.scenes import SCENES
 
 from ..jobs import Job, Note
 from ..memory import MB
-from ..plotting import FLOOR, figure, legend_outside, note, pane, rule, source, table
+from ..plotting import FLOOR, figure, legend_outside, note, pane, push, rule, source, table
 from ..study import theta_for
 from .base import Feature, FeatureView
 
@@ -82,7 +83,8 @@ MEASURED = {}
 
 def key(measured):
     m = measured
-    return (m.scene, tuple(sorted(m.values.items())), m.theta, tuple(m.solvers.items()), m.T, m.peers)
+    return (m.scene, tuple(sorted(m.values.items())), m.method_theta, tuple(m.solvers.items()), m.T, m.peers, m.h,
+            m.horizons)
 
 
 def solvers_of(scene, methods, values, theta):
@@ -143,6 +145,21 @@ class Measurement(Job):
         self.job = inputs
         self.param.update(rows=rows, setting=self._describe(inputs))
 
+    def since(self):
+        """'' while the sidebar and this measurement's controls ask for the rows shown (or none are
+        shown), else what they ask for now, or why a measurement of it is refused: a measurement
+        starts on its Start button, not on every change of the sidebar."""
+        if not self.rows or self.job is None:
+            return ""
+        try:
+            inputs = self._inputs()
+        except InputError as err:
+            return f"they now ask for a measurement that is refused: {err}"
+        if key(inputs) == key(self.job):
+            return ""
+        start = f"cancel this one, then press {self.START}" if self.running else f"press {self.START}"
+        return f"now {self._describe(inputs)}: {start} to measure it"
+
 
 class WorkPrecision(Measurement):
     """Error at T against wall time for the chosen methods over step sizes (and scipy's
@@ -154,6 +171,7 @@ class WorkPrecision(Measurement):
                           doc="Also measure scipy's adaptive solvers over tolerances 1e-3 ... 1e-12.")
     T = param.Number(default=50.0, label="Horizon T", doc="The horizon every run is measured at.")
     KIND = "work–precision"
+    START = "Start work–precision"
     DEFAULTS = wp.DEFAULT_METHODS
 
     def __init__(self, study, **params):
@@ -251,6 +269,7 @@ class LongHorizons(Measurement):
     T_max = param.Selector(default=1e4, objects={f"{T:.0e}": T for T in DRIFT_TOPS}, label="Largest horizon",
                            doc="The horizons are 1e2, 2e2, 5e2, 1e3, ... up to this one.")
     KIND = "long horizons"
+    START = "Start long horizons"
     DEFAULTS = wp.DRIFT_METHODS
 
     def __init__(self, study, **params):
@@ -570,8 +589,13 @@ class WorkPrecisionView(FeatureView):
         m, lh = self.state.measure, self.state.long
         wide = {"sizing_mode": "stretch_width"}
         choices = [self.widget(pn.widgets.MultiChoice, job, "methods", sizing_mode="stretch_width") for job in (m, lh)]
-        wp_row, wp_status = run_controls(m, "Start work–precision")
-        long_row, long_status = run_controls(lh, "Start long horizons", self._long_figures)
+        wp_row, wp_status = run_controls(m, m.START)
+        long_row, long_status = run_controls(lh, lh.START, self._long_figures)
+        self.since = {job: note("") for job in (m, lh)}
+        for job, names in ((m, ["rows", "running", "methods", "T", "peers"]),
+                           (lh, ["rows", "running", "methods", "h", "T_max"])):
+            job.param.watch(self._say_since, names)
+        self.study.param.watch(self._say_since, ["theta", "values"])
         self.wp_plots = [WorkPrecisionPlot(key, title, m.open_row) for key, title in
                          (("error", "relative error at T against wall time"),
                           ("H_ext_max_abs", "max |H~| = max |H + p_t| against wall time"))]
@@ -590,14 +614,14 @@ class WorkPrecisionView(FeatureView):
             pn.Row(choices[0], self.widget(pn.widgets.FloatInput, m, "T", description=m.param.T.doc, width=140),
                    **wide),
             pn.widgets.Checkbox.from_param(m.param.peers),
-            wp_row, wp_status, self.wp_failed, self.wp_hint, self.wp_box,
+            wp_row, wp_status, self.since[m], self.wp_failed, self.wp_hint, self.wp_box,
             rule(),
             note(LONG_TEXT),
             pn.Row(choices[1],
                    self.widget(pn.widgets.FloatInput, lh, "h", description=lh.param.h.doc, format="0.[000000]",
                                width=140),
                    pn.widgets.Select.from_param(lh.param.T_max, width=140), **wide),
-            long_row, long_status, self.long_capped, self.long_failed, self.long_box,
+            long_row, long_status, self.since[lh], self.long_capped, self.long_failed, self.long_box,
             **wide)
 
     def wanted(self):
@@ -610,6 +634,23 @@ class WorkPrecisionView(FeatureView):
         class opening the tab); a new measurement waits for the tab (seconds of both cores)."""
         m = self.state.measure
         return [lambda: m.rows or m.busy or m.recall(), self._draw_stale]
+
+    def shown(self):
+        super().shown()
+        self._say_since()
+
+    def _say_since(self, *events):
+        """Say, while the tab is shown, when the rows shown are not what the sidebar and the
+        measurement's controls now ask for (as the Long run and the Stability map do); a hidden
+        tab's text follows when it is shown."""
+        if not (self.built and self.visible):
+            return
+        for job, pane_ in self.since.items():
+            ask = job.since()
+            text = "" if not ask else (f"<p class='doc since'><b>Computed before the latest changes</b>: "
+                                       f"{html.escape(ask)}.</p>")
+            if text != pane_.object:
+                push(partial(setattr, pane_, "object", text))
 
     def update(self):
         m, lh = self.state.measure, self.state.long
