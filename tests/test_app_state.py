@@ -216,6 +216,33 @@ def test_the_verdict_calls_a_band_of_round_off_round_off():
     assert "both methods' |H + p_t| are round-off" in common.verdict(s.results)
 
 
+def test_a_band_that_grows_by_each_steps_rounding_bias_is_not_called_a_drift():
+    """The hard case "RK4 just past its stability limit" (modulated, eps = 0, h = 2.9): the autonomous
+    quadratic H is kept exactly by midpoint, so its band, 1.5e-13 over 1000 steps, is its steps'
+    rounding, grown linearly by a bias (above 10 eps |H| sqrt(N), within 2 eps |H| N). The verdict said
+    'rk4 drifts faster than midpoint'; it now says midpoint's is rounding."""
+    s = Study(scene="modulated", method="midpoint", other="rk4", h=2.9, T=2900.0, values={"eps": 0.0})
+    midpoint = s.results.entries[0].comparison.run
+    band, energy = np.abs(midpoint.H_ext[:, 0]).max(), np.abs(midpoint.H[:, 0]).max()
+    eps = np.finfo(float).eps
+    assert 10 * eps * energy * np.sqrt(1000) < band <= 2 * eps * energy * 1000 and midpoint.steps == 1000
+    text = common.verdict(s.results)
+    assert "rk4's is the method's error, midpoint's its steps' rounding" in text and "drifts" not in text
+    assert "within 2 ε |H| N of its 1000 steps" in text
+
+
+def test_two_structure_preserving_methods_at_round_off_get_a_verdict_too():
+    """gauss4 against midpoint on the autonomous oscillator (eps = 0): both keep H exactly, their
+    |H + p_t| are round-off, and the verdict said nothing (it compared only a symplectic method with
+    one that preserves nothing). No larger h separates them: the verdict does not say one does."""
+    s = Study(scene="modulated", method="gauss4", other="midpoint", h=0.1, T=1000.0, values={"eps": 0.0})
+    text = common.verdict(s.results)
+    assert "both methods' |H + p_t| are round-off" in text and "for gauss4" in text and "for midpoint" in text
+    assert "larger h" not in text
+    s.param.update(other="rk4", h=0.001, T=1.0)
+    assert "A larger h separates them" in common.verdict(s.results)
+
+
 def test_the_verdict_of_a_run_that_stopped_quotes_what_it_reached():
     """RK4 stops where damped's q passes the floating-point range, before T = 7500: the verdict
     quotes the largest |H + p_t| it reached, not NaN."""
