@@ -38,6 +38,7 @@ A_ALPHA = 0.7  # A is drawn over B, slightly transparent so B shows where they c
 HEIGHT = 260
 POINTS = 1200  # a long series is reduced to this many points (per-bin minima and maxima)
 PATH_POINTS = 4000  # a phase portrait keeps this many points in order
+SCATTERED = 0.3  # a curve whose consecutive points are further apart than this of its extent is drawn as dots
 DENSE = 100_000  # a portrait of more recorded states is rasterized
 RASTER = (480, 360)
 TOOLS = "pan,wheel_zoom,box_zoom,reset,save"
@@ -149,9 +150,12 @@ class Pair:
     optional marker of each curve's first point (`start`) or of every point (`dots`). A is drawn
     translucent, so that B shows where they cross. An `emphasis` (a part of the curves drawn bold
     over them) draws A opaque and B's dashes over it, so that both show where they coincide.
-    `colors(names)` colours them by their methods, `set(data)` replaces their data."""
+    `orbit`: a curve whose points lie far apart (`scattered`) is drawn as dots of that size, not as
+    lines: the chords of a coarse step (implicit midpoint at h = 2.9: two points a turn) filled the
+    annulus around the circle its points lie on. `colors(names)` colours them by their methods,
+    `set(data)` replaces their data."""
 
-    def __init__(self, fig, width=1.8, start=False, dots=False, emphasis=False):
+    def __init__(self, fig, width=1.8, start=False, dots=False, emphasis=False, orbit=0):
         self.fig = fig
         self.sources = {slot: source() for slot in SLOTS}
         self.starts = {slot: source() for slot in SLOTS} if start else {}
@@ -162,6 +166,10 @@ class Pair:
                                         line_alpha=A_ALPHA if slot == "A" and not emphasis else 1.0)
             if dots:
                 self.marks[slot + "."] = fig.scatter("x", "y", source=self.sources[slot], size=4)
+            if orbit:
+                self.marks[slot + ":"] = fig.scatter("x", "y", source=self.sources[slot], size=orbit, visible=False,
+                                                     marker="circle" if slot == "A" else "square",
+                                                     fill_alpha=A_ALPHA if slot == "A" and not emphasis else 1.0)
             if start:
                 self.marks[slot] = fig.scatter("x", "y", source=self.starts[slot], size=9, line_color="white")
 
@@ -171,16 +179,34 @@ class Pair:
             for key, r in self.marks.items():
                 if key[0] == slot:
                     r.glyph.fill_color = color
-                    if key.endswith("."):
+                    if key[1:] in (".", ":"):
                         r.glyph.line_color = color
 
-    def set(self, data):
-        """data: {slot: (x, y)} (a missing slot is emptied)."""
+    def set(self, data, apart=None):
+        """data: {slot: (x, y)} (a missing slot is emptied); apart: {slot: whether its points are drawn
+        as dots} for an `orbit` (by default whether they are `scattered`)."""
         for slot in SLOTS:
             x, y = data.get(slot, (np.empty(0), np.empty(0)))
             self.sources[slot].data = {"x": x, "y": y}
             if self.starts:
                 self.starts[slot].data = {"x": x[:1], "y": y[:1]}
+            dots = self.marks.get(slot + ":")
+            if dots is not None:
+                dotted = scattered(x, y) if apart is None else apart.get(slot, False)
+                if dots.visible != dotted:
+                    dots.visible, self.lines[slot].visible = dotted, not dotted
+
+
+def scattered(x, y):
+    """Whether consecutive points of a curve lie far apart: their median distance above SCATTERED of the
+    curve's extent (a step of more than about 35 degrees of a circle: fewer than ten points a turn)."""
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    ok = np.isfinite(x) & np.isfinite(y)
+    if ok.sum() < 3:
+        return False
+    x, y = x[ok], y[ok]
+    extent = max(np.ptp(x), np.ptp(y))
+    return bool(extent > 0 and np.median(np.hypot(np.diff(x), np.diff(y))) > SCATTERED * extent)
 
 
 def finite(y):

@@ -243,6 +243,25 @@ def test_two_structure_preserving_methods_at_round_off_get_a_verdict_too():
     assert "A larger h separates them" in common.verdict(s.results)
 
 
+def test_an_orbit_of_a_few_points_a_turn_is_drawn_as_its_points():
+    """Midpoint at h = 2.9 on the oscillator puts two points a turn on its circle: drawn as chords
+    between them, they filled the annulus inside it. Such an orbit is drawn as dots (its last part too);
+    RK4's spiral out of it, and both orbits of the first view (h = 0.25), stay lines."""
+    s = Study(scene="modulated", method="midpoint", other="rk4", h=2.9, T=2900.0, values={"eps": 0.0})
+    view = drawn(orbits.OrbitsView(s))
+    figs = shown_figures(view)
+    (_, _, drawn_a), last = figs.portraits[0], figs.tails[0]
+    for pair in (drawn_a, last):
+        assert pair.marks["A:"].visible and not pair.lines["A"].visible
+        assert not pair.marks["B:"].visible and pair.lines["B"].visible
+    x, y = drawn_a.sources["A"].data["x"], drawn_a.sources["A"].data["y"]
+    assert np.allclose(np.hypot(x, y), np.sqrt(2), rtol=1e-12), "the points lie on the exact circle"
+    s.param.update(h=0.25, T=1000.0, values={"eps": 0.2, "alpha": 0.05})
+    figs = shown_figures(view)
+    for pair in (figs.portraits[0][2], figs.tails[0]):
+        assert all(pair.lines[k].visible and not pair.marks[k + ":"].visible for k in "AB")
+
+
 def test_the_verdict_of_a_run_that_stopped_quotes_what_it_reached():
     """RK4 stops where damped's q passes the floating-point range, before T = 7500: the verdict
     quotes the largest |H + p_t| it reached, not NaN."""
@@ -617,7 +636,8 @@ def test_portraits_draw_where_each_method_ends_bold_with_b_dashed_over_a():
         figs = shown_figures(view)
         for (_, fig, _), last in zip(figs.portraits, figs.tails):
             order = [r for r in fig.renderers if r in last.lines.values()]
-            assert order == [last.lines["A"], last.lines["B"]] and order == fig.renderers[-2:]
+            ours = [last.lines["A"], last.marks["A:"], last.lines["B"], last.marks["B:"]]
+            assert order == [last.lines["A"], last.lines["B"]] and fig.renderers[-4:] == ours
             assert last.lines["B"].glyph.line_dash == [6] and last.lines["A"].glyph.line_alpha == 1.0
         for slot, c in common.comparisons(s.results).items():
             q = c.run.q[:, 0, 0]

@@ -237,7 +237,8 @@ def ended(run, T):
 
 
 TAIL = 0.02  # the last part of a run drawn bold over its whole orbit in the portraits
-PORTRAIT_MARKS = f"Portraits: a dot at the start, the last {TAIL:.0%} of each run bold."  # said below them
+PORTRAIT_MARKS = (f"Portraits: a dot at the start, the last {TAIL:.0%} of each run bold; an orbit of fewer than "
+                  "about ten points a turn is drawn as its points, not as chords between them.")  # said below them
 
 
 def tail(x, y):

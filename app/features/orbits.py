@@ -10,7 +10,20 @@ import panel as pn
 from cosymp.diagnostics import ORBIT_ERROR
 from cosymp.scenes import SCENES
 
-from ..plotting import SLOTS, Pair, Raster, figure, grid, note, pane, path, peaks, reset_ranges, table
+from ..plotting import (
+    SLOTS,
+    Pair,
+    Raster,
+    figure,
+    grid,
+    note,
+    pane,
+    path,
+    peaks,
+    reset_ranges,
+    scattered,
+    table,
+)
 from ..study import LIVE_REFERENCE_STEPS
 from .base import Feature, FeatureView
 from .common import (
@@ -61,8 +74,8 @@ class Figures:
         for _ in range(portraits):
             for slot in (SLOTS if split else (None,)):
                 fig = figure("")
-                self.portraits.append((slot, fig, Raster(fig) if dense else Pair(fig, start=True)))
-                self.tails.append(Pair(fig, width=3.2, emphasis=True))
+                self.portraits.append((slot, fig, Raster(fig) if dense else Pair(fig, start=True, orbit=4)))
+                self.tails.append(Pair(fig, width=3.2, emphasis=True, orbit=8))
         # The error split in two, each titled by what it measures: the energy error (what structure
         # preservation bounds) beside the trajectory error (which also counts the phase, where order
         # wins). One title for every scene (a changed title makes the page lay out the tab): what
@@ -93,9 +106,12 @@ class Figures:
             drawn.colors(names(runs))
             last.colors(names(runs))
             shown = {s: c for s, c in cs.items() if slot is None or s == slot}
-            drawn.set({s: (zcols(c.run, i, j) if isinstance(drawn, Raster) else path(*zcols(c.run, i, j)))
-                       for s, c in shown.items()})
-            last.set({s: path(*tail(*zcols(c.run, i, j))) for s, c in shown.items()})
+            paths = {s: (zcols(c.run, i, j) if isinstance(drawn, Raster) else path(*zcols(c.run, i, j)))
+                     for s, c in shown.items()}
+            drawn.set(paths)
+            # the last part drawn as its whole orbit is: dots where that is (its fewer points lie further apart)
+            last.set({s: path(*tail(*zcols(c.run, i, j))) for s, c in shown.items()},
+                     apart={s: not isinstance(drawn, Raster) and scattered(*xy) for s, xy in paths.items()})
         self.energy.colors(names(runs))
         # From the first step: H + p_t is 0 by construction at t = 0, and drawn at FLOOR it stretched
         # the log axis over a dozen empty decades.
