@@ -96,7 +96,9 @@ class Axis:
             values = np.geomspace(start, stop, num)
         else:
             values = np.linspace(start, stop, num)
-        return cls(name, tuple(float(v) for v in values), log)
+        # to 15 significant digits: the binary noise of the spacing (0.6000000000000001 for 0:0.8:5) is
+        # not a value anyone asked for, and it was what the rows and the map's axis said
+        return cls(name, tuple(float(f"{v:.15g}") for v in values), log)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -62,6 +62,8 @@ def test_linear_axis_values():
     assert sweep.Axis.parse("q0=-2:2:5").values == pytest.approx((-2, -1, 0, 1, 2), rel=0, abs=1e-15)
     assert sweep.Axis.parse("eps=0.3:0.3:1").values == (0.3,)
     assert all(isinstance(v, float) for v in a.values)
+    assert sweep.Axis.parse("eps=0:0.8:5").values == (0.0, 0.2, 0.4, 0.6, 0.8), "no 0.6000000000000001"
+    assert sweep.Axis.parse("h=1e-3:1:4:log").values == (1e-3, 1e-2, 1e-1, 1.0)
 
 
 def test_log_axis_values():
