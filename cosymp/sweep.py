@@ -13,7 +13,9 @@ from the scene's initial state with step h to horizon T, and gives the requested
   Floquet exponent inside a Mathieu tongue, ln|R(ih)|/h for a one-step method with stability
   function R on the harmonic oscillator.
 
-A run that fails (overflow, Newton) leaves NaN measures and its message in `status`.
+A run that fails (overflow, Newton) leaves NaN measures and its message in `status`. A run takes
+T/h rounded up steps of h: where T is not a whole number of them, it ends past T, at t_final (a
+column of the written rows; the summary counts such points).
 
 Points are independent and deterministic, so the figures are identical however they are
 spread: in-process, tasks run on a thread pool as wide as the machine (the compiled loops
@@ -350,11 +352,22 @@ class Result:
     spread_s: float
 
     def columns(self):
-        """{name: list} over the points in C order: the varied names, the measures, status."""
+        """{name: list} over the points in C order: the varied names, t_final (where each run ended:
+        T rounded up to a whole number of steps of h), the measures, status."""
         cols = {name: c.tolist() for name, c in self.plan.columns(np.arange(self.plan.size)).items()}
+        cols["t_final"] = self.t_final(cols).tolist()
         cols.update({k: self.values[k].ravel().tolist() for k in self.plan.measures})
         cols["status"] = self.status.ravel().tolist()
         return cols
+
+    def t_final(self, cols=None):
+        """(points,) array of where each point's run ended, steps * h: past T where T is not a whole
+        number of steps of h (a row labelled T = 49.61 at h = 0.1 ran to 49.7)."""
+        cols = cols or {name: c.tolist() for name, c in self.plan.columns(np.arange(self.plan.size)).items()}
+        size = self.plan.size
+        pairs = list(zip(cols.get("h", [self.plan.h] * size), cols.get("T", [self.plan.T] * size)))
+        ends = {(h, T): check_step(h, T) * h for h, T in set(pairs)}
+        return np.array([ends[pair] for pair in pairs])
 
     def failures(self):
         """(how many points failed, the first failure's message or None)."""
@@ -548,6 +561,14 @@ def summary(result):
         hi = np.unravel_index(np.nanargmax(v), v.shape)
         at = ", ".join(f"{a.name} = {a.values[i]:.4g}" for a, i in zip(p.axes, hi))
         lines.append(f"  {k}: min {np.nanmin(v):.4g}, max {np.nanmax(v):.4g} (at {at})")
+    cols = {name: c.tolist() for name, c in p.columns(np.arange(p.size)).items()}
+    T = np.asarray(cols.get("T", [p.T] * p.size), float)
+    past = result.t_final(cols) - T
+    beyond = past > 1e-9 * T
+    if beyond.any():
+        lines.append(f"  {beyond.sum()} point{'s' if beyond.sum() > 1 else ''} ran past T, up to {past.max():.4g} "
+                     "beyond it (T is not a whole number of steps of h there): their figures are at t_final, a "
+                     "column of the written rows")
     if failed:
         lines.append(f"  {failed} point{'s' if failed > 1 else ''} failed, e.g.: {first}")
     return "\n".join(lines) + "\n"

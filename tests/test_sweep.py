@@ -499,8 +499,9 @@ def test_write_read_round_trip(suffix, tmp_path, inprocess):
     path = tmp_path / f"sweep{suffix}"
     sweep.write(r, path)
     cols = sweep.read(path)
-    assert list(cols) == ["h", "eps", *sweep.MEASURES, "status"]
+    assert list(cols) == ["h", "eps", "t_final", *sweep.MEASURES, "status"]
     assert all(len(v) == p.size for v in cols.values())
+    assert np.array_equal(cols["t_final"], [math.ceil(p.T / h - 1e-9) * h for h in cols["h"]])
     idx = np.unravel_index(np.arange(p.size), p.shape)
     assert np.array_equal(cols["h"], np.array(p.axes[0].values)[idx[0]])
     assert np.array_equal(cols["eps"], np.array(p.axes[1].values)[idx[1]])
@@ -533,7 +534,7 @@ def test_cli_sweep_writes_rows_and_summary(tmp_path):
     code, out, err = run_cli(*GRID, "-o", str(path))
     assert code == 0, err
     cols = sweep.read(path)
-    assert list(cols) == ["eps", "alpha", "growth", "status"] and len(cols["status"]) == 9
+    assert list(cols) == ["eps", "alpha", "t_final", "growth", "status"] and len(cols["status"]) == 9
     assert cols["status"] == ["ok"] * 9
     assert cols["eps"] == pytest.approx([0.0] * 3 + [0.2] * 3 + [0.4] * 3, rel=1e-15)
     assert cols["alpha"] == pytest.approx([1.8, 2.0, 2.2] * 3, rel=1e-15)
@@ -675,3 +676,15 @@ def test_step_counts_come_from_the_h_and_T_axes():
     assert counts.tolist() == [[math.ceil(T / h - 1e-9) for T in (10, 20, 30)] for h in (0.1, 0.2, 0.3, 0.4)]
     fixed = sweep.plan("modulated", "midpoint", ["eps=0:0.4:5"], ["growth"], h=0.25, T=10)
     assert fixed.step_counts()[0].tolist() == [[40]] and fixed.step_counts()[1] == 5
+
+
+def test_a_horizon_that_is_not_a_whole_number_of_steps_says_where_its_runs_ended(tmp_path):
+    """A run takes T/h rounded up steps: T = 49.61 ... 49.70 at h = 0.1 all ran to 49.7, and ten
+    identical rows were labelled with ten horizons. The rows now carry t_final, and the summary says
+    how many points ran past T and by how much."""
+    p = sweep.plan("decaying", "midpoint", ["T=49.61:49.70:10"], ("error_final",), h=0.1)
+    r = sweep.run(p, workers=None)
+    assert np.allclose(r.t_final(), 49.7, rtol=1e-12) and len(set(r.values["error_final"].ravel())) == 1
+    assert "9 points ran past T, up to 0.09 beyond it" in sweep.summary(r)
+    on_grid = sweep.run(sweep.plan("decaying", "midpoint", ["T=49.6:49.7:2"], ("error_final",), h=0.1))
+    assert "past T" not in sweep.summary(on_grid)
