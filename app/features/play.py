@@ -54,7 +54,8 @@ class PlayView(FeatureView):
             line.glyph.update(line_color=FAINT, line_alpha=0.6, line_dash="solid")
         self.trace = Pair(self.orbit_fig, width=2)
         self.now = Pair(self.orbit_fig, width=0, start=True)
-        self.loop = Pair(figure("loop of initial states, now", "q1", "p1"), width=2)
+        # equal scales: a circle of initial states is drawn round, so that what deforms it is the method
+        self.loop = Pair(figure("loop of initial states, now", "q1", "p1", aspect=True), width=2)
         self.plots = time_plots(["energy", "area"])
         self.cursors = []
         for p in self.plots.values():
