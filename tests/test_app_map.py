@@ -163,6 +163,19 @@ def test_a_cell_of_an_h_axis_sets_the_step():
     assert s.h == m.result.plan.axes[0].values[2] == 3.0 and s.values == {"lam": 5.0}
 
 
+def test_a_map_built_before_its_data_has_every_column_its_glyphs_read_and_a_colour_range(tongue):
+    """The map is built ahead, empty: its quads read left, right, bottom, top and z from a source
+    that held only x and y, and its log colour range was -Infinity (BokehJS warned of each, on every
+    page that built the tab)."""
+    _, m = tongue
+    plot = maps.MapPlot(False, False, lambda i, j: None)
+    glyph = plot.fig.renderers[0].glyph
+    read = {glyph.left, glyph.right, glyph.bottom, glyph.top, glyph.fill_color.field}
+    assert read <= set(plot.source.data) and all(len(v) == 0 for v in plot.source.data.values())
+    assert 0 < plot.mapper.low < plot.mapper.high < math.inf
+    assert set(maps.cells(m.result)) == set(plot.source.data), "the data it is sent later has the same columns"
+
+
 def test_the_heat_map_taps_to_the_cell_under_the_click_and_marks_failures(tongue):
     _, m = tongue
     opened = []

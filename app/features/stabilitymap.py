@@ -12,6 +12,7 @@ import param
 from bokeh.events import Tap
 from bokeh.models import (
     ColorBar,
+    ColumnDataSource,
     CustomJS,
     CustomJSTickFormatter,
     HoverTool,
@@ -27,7 +28,7 @@ from cosymp.methods import METHODS
 from cosymp.scenes import SCENES
 
 from ..jobs import Job
-from ..plotting import FLOOR, LOG_TICKS, figure, note, pane, source
+from ..plotting import FLOOR, LOG_TICKS, figure, note, pane
 from ..study import soft_range, theta_for
 from .base import Feature, FeatureView
 from .workprecision import run_controls
@@ -271,6 +272,9 @@ def edges(values, log):
     return np.exp(e) if log else e
 
 
+CELL_FIELDS = ("left", "right", "bottom", "top", "z", "i", "j", "x", "y")
+
+
 def cells(result):
     """The quads of a sweep's single measure (x fastest within each y row is not assumed: C order
     of the grid, x the first axis): their edges, values and grid indices."""
@@ -330,8 +334,10 @@ class MapPlot:
 
     def __init__(self, logx, logy, on_tap):
         self.fig = figure("", "x", "y", logx=logx, logy=logy, height=HEIGHT)
-        self.source = source()
-        self.mapper = LogColorMapper(palette=Viridis256, nan_color="black")
+        # Every column and a colour range from the start: a map built ahead of its data, empty, made
+        # BokehJS warn of nonexistent fields and of a colour range of -Infinity.
+        self.source = ColumnDataSource({k: np.empty(0) for k in CELL_FIELDS})
+        self.mapper = LogColorMapper(palette=Viridis256, nan_color="black", low=1.0, high=10.0)
         quads = self.fig.quad(left="left", right="right", bottom="bottom", top="top", source=self.source,
                               fill_color=transform("z", self.mapper), line_color=transform("z", self.mapper),
                               line_width=0.6, nonselection_fill_alpha=1.0, nonselection_line_alpha=1.0)
