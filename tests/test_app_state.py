@@ -887,6 +887,23 @@ def test_gauge_study_gives_every_gauge_and_invariant_transported_observables():
     assert transported < 1e-13
 
 
+def test_a_long_gauge_study_shows_its_last_part_where_the_curves_can_be_told_apart():
+    """The charged scene's first view runs 300 time units, 100 gyrations: the orbit, p_x and Π_x of the
+    five gauges filled one band each. They show the last 20 (40 time scales), and the text says so; the
+    differences cover the whole run; the paper's T = 20 is shown whole."""
+    s = Study(scene="charged", view="gauges", h=0.15, T=300.0, values={"B0": 1.0, "eps": 0.2, "w": 0.3})
+    g = gauges.GaugeStudy(s)
+    for quantity in ("p", "Pi"):
+        for x, _ in gauges.gauge_series(g.results, "per-gauge", quantity).values():
+            assert x[0] >= 280.0 - 1e-9 and x[-1] == pytest.approx(300.0)
+    assert all(x[0] < 1 for x, _ in gauges.gauge_series(g.results, "per-gauge", "diff").values())
+    view = drawn(gauges.GaugeView(s, g))
+    assert "last 20 time units (t from 280 to 300)" in view.floor.object
+    s.T = 20.0
+    assert all(x[0] < 1 for x, _ in gauges.gauge_series(g.results, "per-gauge", "p").values())
+    assert "time units (t from" not in view.floor.object
+
+
 def test_long_run_in_chunks_matches_the_one_shot_run_and_can_be_cancelled():
     s = Study(scene="damped", values={"gamma": 0.0002})
     lr = longrun.LongRun(s, T_long=2000.0)

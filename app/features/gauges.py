@@ -93,13 +93,28 @@ class GaugeStudy(Follower):
         """A live view keeps no status line."""
 
 
+WINDOW = 40  # time scales: the orbit, p and Π plots show the last this many of a run much longer
+
+
+def shown_from(t):
+    """The first time the orbit, p and Π plots show: the run's start, or WINDOW time scales before
+    its end where it is longer than 1.5 times that. The first view's 300 time units (100 gyrations)
+    drew each as one solid band, in which the gauges' curves could not be told apart."""
+    span = WINDOW * gauged_scene().time_scale
+    return float(t[-1] - span) if t[-1] - t[0] > 1.5 * span else float(t[0])
+
+
 def gauge_series(data, kind, quantity):
-    """{gauge: (x, y)} of one quantity of every gauge's run (the difference: not the original's)."""
+    """{gauge: (x, y)} of one quantity of every gauge's run (the difference: not the original's);
+    the orbit, p and Π from `shown_from` on, the difference over the whole run."""
     out = {}
     for g in data:
         if quantity == "diff" and g == "original":
             continue
         t, q, p, Pi = data[g][kind]
+        if quantity != "diff":
+            k = np.searchsorted(t, shown_from(t))
+            t, q, p, Pi = t[k:], q[k:], p[k:], Pi[k:]
         if quantity == "orbit":
             out[g] = path(q[:, 0], q[:, 1])
         elif quantity == "p":
@@ -189,7 +204,12 @@ class GaugeView(FeatureView):
                     self.sources[kind, quantity, name].data = {"x": x, "y": y}
                     if quantity == "diff":
                         largest[kind] = max(largest.get(kind, 0.0), float(np.max(y, initial=0.0)))
-        self.floor.object = f"<p class='doc'>{html.escape(floor_text(largest))}</p>"
+        t = next(iter(g.results.values()))["per-gauge"][0]
+        start = shown_from(t)
+        window = (f" The orbit, p<sub>x</sub> and Π<sub>x</sub> plots show the run's last {t[-1] - start:g} time "
+                  f"units (t from {start:g} to {t[-1]:g}): over all of it their curves fill one band. The "
+                  "difference plots cover the whole run." if start > t[0] else "")
+        self.floor.object = f"<p class='doc'>{html.escape(floor_text(largest))}{window}</p>"
 
 
 # Not built ahead: ten figures and five equations (a second of the page's time) that only the charged
