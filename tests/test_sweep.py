@@ -137,7 +137,7 @@ BAD_PLANS = [
     ((*MOD, ["eps=0:1:3"]), {"T": -1.0}, "T = -1"),
     ((*MOD, ["eps=0:1:3"]), {"h": 0.0}, "must be positive"),
     (("modulated", "boris", ["eps=0:1:3"]), {}, "boris"),
-    (("charged", "midpoint", ["T=1:20:3"]), {"values": {"beta": "1/(t-5)"}}, "singular at t = 5"),
+    (("charged", "midpoint", ["T=1:20:3"]), {"values": {"beta": "1/(t-5)"}}, "leaves floating-point range at t = 5"),
 ]
 
 

@@ -167,9 +167,9 @@ class ChargedScene(Scene):
             return
         t = _singularity(beta, float(T))
         if t is not None:
-            raise InputError(f"beta(t) = {quoted(beta)} is singular at t = {t:.6g} (it or its derivatives are not "
-                             f"finite there, or divide by 0), inside the run's [0, {T:g}]: change beta(t), or "
-                             f"shorten T below {t:.6g}")
+            raise InputError(f"beta(t) = {quoted(beta)} leaves floating-point range at t = {t:.6g} (it or its first "
+                             f"two derivatives overflow there, or divide by 0), inside the run's [0, {T:g}]: change "
+                             f"beta(t), or shorten T below {t:.6g}")
 
     def pack(self, vals):
         g = GAUGES[vals["gauge"]]

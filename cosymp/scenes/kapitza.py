@@ -87,7 +87,8 @@ SCENE = Scene(
              "midpoint", "rk4", 0.002, 20.0, values={"q0": 3.0, "a": 0.1, "nu": 40.0}, view="play"),
         Case("Kapitza: Newton at a large step",
              "h = 0.1 with the drive at nu = 40 (h nu = 4): Newton still converges to round-off every "
-             "step, and the pendulum stays up.",
+             "step and the pendulum stays up, but a step this long does not follow the drive: |H + p_t| "
+             "is as large as H itself, and the verdict says that this h bounds nothing.",
              "midpoint", "rk4", 0.1, 20.0, values={"q0": 3.0, "a": 0.1, "nu": 40.0}, hard=True),
         Case("Kapitza: Newton fails",
              "a = 0.3 at h = 0.5: the midpoint equations have no nearby solution; the message names "
