@@ -201,7 +201,11 @@ def plan(scene, method, axes, measures=("growth",), values=None, theta=None, h=N
     for n in names:
         if n in fixed or run.get(n) is not None:
             raise InputError(f"{quoted(n)} is both given a fixed value and varied: drop one")
-    sc.values(fixed)
+    vals = sc.values(fixed)
+    idle = [n for n in names if n in sc.unused(vals)]
+    if idle:
+        raise InputError(f"{quoted(idle[0])} has no effect on scene '{sc.name}' with these values (every point would "
+                         f"give the same run): vary another name, or set the value that makes it act")
     p = Plan(sc.name, m.name, tuple(fixed.items()), theta,
              sc.h if h is None else as_number(h, "h"), sc.T if T is None else check_horizon(T),
              axes, measures)

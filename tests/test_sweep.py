@@ -688,3 +688,13 @@ def test_a_horizon_that_is_not_a_whole_number_of_steps_says_where_its_runs_ended
     assert "9 points ran past T, up to 0.09 beyond it" in sweep.summary(r)
     on_grid = sweep.run(sweep.plan("decaying", "midpoint", ["T=49.6:49.7:2"], ("error_final",), h=0.1))
     assert "past T" not in sweep.summary(on_grid)
+
+
+@pytest.mark.parametrize("values, name", [({"beta": "constant"}, "eps"), ({"beta": "0.05*(1+t)"}, "B0")])
+def test_a_name_the_run_does_not_use_is_refused(values, name):
+    """eps and w shape only the paper's beta(t), B0 not a typed one: varied there, every row was the
+    same run (the app's map already left such axes out)."""
+    with pytest.raises(InputError) as info:
+        sweep.plan("charged", "midpoint", [f"{name}=0.1:1:3"], values=values)
+    assert str(info.value).startswith(f"'{name}' has no effect on scene 'charged'")
+    assert sweep.plan("charged", "midpoint", [f"{name}=0.1:1:3"]).size == 3, "with the paper's beta(t) it acts"
