@@ -1,5 +1,6 @@
 """The app's work-precision and long-horizon measurements (app.features.workprecision) and their
 plots, without a server."""
+import dataclasses
 import html
 import itertools
 import math
@@ -374,6 +375,11 @@ def test_the_tab_says_when_the_sidebar_or_its_controls_ask_for_another_measureme
     m.T = 3.0
     assert "Computed before the latest changes" in since.object and "T = 3" in since.object
     assert "press Start work–precision" in since.object and view.since[both.long].object == ""
+    m.running, m.run = True, SimpleNamespace(inputs=m._inputs(), cancelled=False)  # T = 3 measured, no row yet
+    assert m.since() == "", "what is asked for is being measured: no 'cancel this one' for it"
+    m.run = SimpleNamespace(inputs=dataclasses.replace(m._inputs(), T=4.0), cancelled=False)
+    assert "cancel this one, then press Start work–precision" in m.since()
+    m.running, m.run = False, None
     m.T = 2.0
     assert since.object == ""
     s.values = {"lam": 0.5}

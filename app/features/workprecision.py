@@ -147,8 +147,8 @@ class Measurement(Job):
 
     def since(self):
         """'' while the sidebar and this measurement's controls ask for the rows shown (or none are
-        shown), else what they ask for now, or why a measurement of it is refused: a measurement
-        starts on its Start button, not on every change of the sidebar."""
+        shown, or are being measured), else what they ask for now, or why a measurement of it is
+        refused: a measurement starts on its Start button, not on every change of the sidebar."""
         if not self.rows or self.job is None:
             return ""
         try:
@@ -156,6 +156,8 @@ class Measurement(Job):
         except InputError as err:
             return f"they now ask for a measurement that is refused: {err}"
         if key(inputs) == key(self.job):
+            return ""
+        if self.busy and key(inputs) == key(self.run.inputs):  # it is being measured: the status says so
             return ""
         start = f"cancel this one, then press {self.START}" if self.running else f"press {self.START}"
         return f"now {self._describe(inputs)}: {start} to measure it"
