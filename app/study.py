@@ -107,7 +107,7 @@ class Runs:
     h: float
     T: float
     entries: tuple
-    reference_failure: str = ""  # where and why a reference run stopped (run_pair)
+    reference_failure: str = ""  # where and why the reference run stopped (run_pair)
 
     @property
     def ok(self):
@@ -162,7 +162,7 @@ def run_pair(scene, setups, h, T):
         try:
             reference, stopped = reference.result(), ""
         except RunError as err:
-            reference, stopped = None, f"stopped at t = {err.time:.6g} ({str(err).split(' in step')[0]})"
+            reference, stopped = None, str(err)
     entries = []
     for s, (comparison, failure) in zip(setups, done):
         label = s.method.label(s.theta)
@@ -179,7 +179,7 @@ def failure_note(runs):
                                           if e.comparison is not None else "")
              for e in runs.entries if e.failure]
     if runs.reference_failure:
-        texts.append(f"no error is measured: the reference run (rk8 at a fine step) {runs.reference_failure}")
+        texts.append(f"no error is measured: {runs.reference_failure}")
     return Note("warning", " | ".join(texts)) if texts else None
 
 

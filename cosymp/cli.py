@@ -153,9 +153,10 @@ def _run(args, out):
               f"  max |det M_k - 1|      = {res['det_max_dev']:.3e}",
               f"  max |M^T J M - J|      = {res['symp_max_dev']:.3e}"]
     if res["error_final"] is not None:
+        unc = res["reference_uncertainty"]
         lines.append(f"  relative error at T vs {res['reference']} = {res['error_final']:.3e}"
-                     + (f" (the reference's own, estimated: {res['reference_uncertainty']:.1e})"
-                        if res["reference_uncertainty"] else ""))
+                     + ("" if unc == 0 else f" (the reference's own, estimated: {unc:.1e})" if unc is not None
+                        else " (the reference's own: unknown, its check at twice its step failed)"))
     lines.append(f"  integration time {res['wall_s']:.3f} s (total {res['wall_total_s']:.3f} s)")
     out.write("\n".join(lines) + "\n")
 

@@ -12,23 +12,25 @@ from .kernels.loops import energies, vector_field
 REFERENCE_FRACTION = 0.02
 
 
-def check_reference(setup, h, T):
+def check_reference(setup, h, T, skip=""):
     """InputError, before anything runs, if the fine rk8 reference of a run of setup with step h
-    to T (scenes without an exact flow) passes the step cap."""
+    to T (scenes without an exact flow) passes the step cap. skip: how the caller leaves the error
+    at T out (the run's --no-error), said after "shorten T"."""
     fine = fine_steps(setup, h, T)
     if not fine <= MAX_STEPS:
         count = f"{fine:.3g}" if math.isfinite(fine) else "more than 1e+300"
         raise InputError(f"the reference for this run would take {count} steps of rk8 (at most "
                          f"{REFERENCE_FRACTION:g} of the scene's time scale and half of h each), over the cap "
-                         f"of {MAX_STEPS:.0e}: shorten T, or skip the error at T (--no-error)")
+                         f"of {MAX_STEPS:.0e}: shorten T" + (f", or {skip}" if skip else ""))
 
 
 def refinement(setup, h):
     """k, the reference's rk8 steps per step h: each no larger than 2% of the scene's time scale,
     and k even and at least 2. The reference is never the run itself (rk8 at h was measured against
-    itself, an error of 0), and its check at twice its step ends on the same final time."""
+    itself, an error of 0), and its check at twice its step ends on the same final time. Infinite
+    only where h over 2% of the time scale passes floating point."""
     ratio = h / (REFERENCE_FRACTION * setup.scene.time_scale)
-    if not ratio <= MAX_STEPS:  # the reference is refused: no whole number for a ratio that overflows
+    if not math.isfinite(ratio):
         return math.inf
     k = max(2, math.ceil(ratio))
     return k + k % 2
@@ -42,27 +44,46 @@ def fine_steps(setup, h, T):
     return check_step(h, T) * refinement(setup, h)
 
 
-def reference_states(setup, h, T, z0=None):
+def reference_states(setup, h, T, z0=None, skip=""):
     """(states, label) of a fine rk8 run of setup's scene and parameters from z0 (the scene's
     initial condition by default), at every multiple of h up to the run's final time steps*h:
     states (steps + 1, 2n), its step h/k no larger than 2% of the scene's time scale; label says
-    which reference it is. For the scenes without an exact flow."""
+    which reference it is. For the scenes without an exact flow; failures and skip as for
+    reference_final."""
     steps = check_step(h, T)
-    check_reference(setup, h, T)
+    check_reference(setup, h, T, skip)
     k = refinement(setup, h)
-    run = simulate(Setup.make(setup.scene, "rk8", setup.values), h / k, steps * h, z0=z0, stride=k)
+    run = _fine_run(setup, h, k, steps * h, z0, k, skip)
     return run.z[:, 0], f"rk8 at h/{k}"
 
 
-def reference_final(setup, h, T, z0=None, uncertainty=True):
+def _fine_run(setup, h, k, t_final, z0, stride, skip):
+    """simulate rk8 at h/k to t_final; a failure is said to be the reference's (its step count
+    and "reduce h" were the run's words, not the reference's)."""
+    try:
+        return simulate(Setup.make(setup.scene, "rk8", setup.values), h / k, t_final, z0=z0, stride=stride)
+    except RunError as e:
+        what = "leaves floating-point range (|z| > 1.8e308)" if str(e).startswith("overflow") else "fails"
+        raise _failed(f"rk8 at h/{k}", what, e, skip) from None
+
+
+def _failed(reference, what, e, skip):
+    """The RunError of a reference that failed as e did, worded as the reference's."""
+    return RunError(f"the reference for the error at T, {reference}, {what} at t ≈ {e.time:.6g}: shorten T below it"
+                    + (f", or {skip}" if skip else ""), e.time, e.step)
+
+
+def reference_final(setup, h, T, z0=None, uncertainty=True, skip=""):
     """(z at the run's final time steps*h, uncertainty) for a run of setup with step h to T.
 
     Exact flow: one exact step over the whole horizon, split where a step fails down to 2^-30 of it
     (integrate.exact_flow: the damped oscillator's one-step map passes floating point at γ T = 709,
-    its state only at γ T = 1420; a step of h could fail where the state did not), uncertainty 0;
-    RunError where the state itself leaves floating point. Otherwise rk8 at the step h/k of `refinement`; its uncertainty (NaN when not asked for)
-    is Richardson's estimate of its error from rk8 at twice that step, |z_k - z_(k/2)| / (2^8 - 1),
-    or the round-off of its steps, eps sqrt(steps) |z|, where that is larger.
+    its state only at γ T = 1420; a step of h could fail where the state did not), uncertainty 0.
+    Otherwise rk8 at the step h/k of `refinement`; its uncertainty (NaN when not asked for, or where
+    its check fails) is Richardson's estimate of its error from rk8 at twice that step,
+    |z_k - z_(k/2)| / (2^8 - 1), or the round-off of its steps, eps sqrt(steps) |z|, where that is
+    larger. RunError, saying it is the reference's, where the reference itself cannot go on; skip
+    as for check_reference.
     """
     steps = check_step(h, T)
     t_final = steps * h
@@ -71,19 +92,19 @@ def reference_final(setup, h, T, z0=None, uncertainty=True):
         try:
             z, _ = exact_flow(exact, initial_states(setup, z0), None, 0.0, t_final, t_final * 2.0 ** -30)
         except RunError as e:
-            raise RunError(f"the reference, the exact flow, leaves floating-point range at t ≈ {e.time:.4g} "
-                           f"(|z| > 1.8e308): shorten T below it", e.time, e.step) from None
+            raise _failed("the exact flow", "leaves floating-point range (|z| > 1.8e308)", e, skip) from None
         return z, np.zeros(z.shape[0])
-    check_reference(setup, h, T)
+    check_reference(setup, h, T, skip)
     k = refinement(setup, h)
-    fine = Setup.make(setup.scene, "rk8", setup.values)
-    a = simulate(fine, h / k, t_final, z0=z0, stride=steps * k)
+    a = _fine_run(setup, h, k, t_final, z0, steps * k, skip)
+    spread = np.full(a.z.shape[1], np.nan)
     if uncertainty:
-        b = simulate(fine, 2 * h / k, t_final, z0=z0, stride=steps * k // 2)
+        try:
+            b = _fine_run(setup, h, k // 2, t_final, z0, steps * k // 2, skip)
+        except RunError:  # the check at twice the step left its stability region: the uncertainty is unknown
+            return a.z[-1], spread
         rounding = np.finfo(float).eps * math.sqrt(steps * k) * norm(a.z[-1])
         spread = np.maximum(norm(a.z[-1] - b.z[-1]) / (2 ** 8 - 1), rounding)
-    else:
-        spread = np.full(a.z.shape[1], np.nan)
     return a.z[-1], spread
 
 

@@ -245,6 +245,36 @@ def test_a_reference_over_the_step_cap_is_refused_before_the_run(monkeypatch):
     assert "over the cap" in err and "--no-error" in err and err.count("\n") == 1
 
 
+def test_a_reference_whose_check_overflows_has_an_unknown_uncertainty_not_a_failed_run():
+    """beta(t) = exp(t): the reference, rk8 at h/2, reaches T = 8.5 (it overflows near 8.87), its check at
+    twice its step (rk8 at h) overflows at 8.25. That check failed the whole run, with an overflow message
+    counting the check's steps; its uncertainty is now unknown (null in JSON) and said so."""
+    argv = ("run", "charged", "--set", "beta=exp(t)", "--T", "8.5")
+    code, out, err = run_cli(*argv, "--json")
+    assert code == 0, err
+    res = _strict(out)
+    assert res["reference"] == "rk8 at h/2" and res["reference_uncertainty"] is None
+    assert math.isfinite(res["error_final"])
+    code, out, err = run_cli(*argv)
+    assert code == 0 and "(the reference's own: unknown, its check at twice its step failed)" in out
+
+
+def test_a_reference_that_fails_says_it_is_the_reference():
+    """To T = 9 the reference itself overflows (t = 8.87) where midpoint does not: the message said
+    "overflow in step 17735 ... reduce h", the reference's step count and a step the user does not set."""
+    code, out, err = run_cli("run", "charged", "--set", "beta=exp(t)", "--T", "9")
+    assert code == 3 and not out and err.count("\n") == 1
+    assert err.startswith("cosymp: the reference for the error at T, rk8 at h/2, leaves floating-point range")
+    assert "at t ≈ 8.8" in err and err.rstrip().endswith("shorten T below it, or skip the error at T (--no-error)")
+
+
+def test_a_reference_over_the_cap_gives_its_true_step_count():
+    """One step of h = 3e5 on kapitza takes 1.5e8 rk8 steps of its reference: the message said "more than
+    1e+300 steps" for any count over the cap."""
+    code, out, err = run_cli("run", "kapitza", "--h", "3e5", "--T", "3e5")
+    assert code == 2 and not out and "would take 1.5e+08 steps of rk8" in err
+
+
 @pytest.mark.parametrize("argv, flags", [
     (["report", "paper", "--h", "0.1"], "--h applies"),
     (["report", "paper", "--method", "rk4", "--set", "gamma=1"], "--method, --set apply"),

@@ -315,6 +315,23 @@ def test_error_final_where_one_exact_step_over_T_overflows():
         assert 1e-6 < error < 0.1 and error == pytest.approx(relative_error(run, exact)[0], rel=1e-5)
 
 
+def test_a_sweeps_reference_is_one_rk8_run_and_its_refusal_names_the_sweeps_way_out(monkeypatch):
+    """A point's error_final takes one reference run (its uncertainty, a second run at twice the step, is
+    not used: it doubled the reference's cost); a reference over the cap named --no-error, which only
+    `cosymp run` has."""
+    from cosymp import reference
+
+    calls = []
+    fine_run = reference._fine_run
+    monkeypatch.setattr(reference, "_fine_run", lambda *a: calls.append(a[2]) or fine_run(*a))
+    r = sweep.run(sweep.plan("modulated", "midpoint", ["eps=0:0.1:2"], ["error_final"], h=0.1, T=5.0))
+    assert list(r.status) == ["ok", "ok"] and all(np.isfinite(r.values["error_final"]))
+    assert len(calls) == 2, "one reference run per point"
+    with pytest.raises(InputError) as info:
+        sweep.plan("kapitza", "midpoint", ["T=1e5:3e5:2"], ["error_final"])
+    assert str(info.value).endswith("shorten T, or measure something other than error_final")
+
+
 @pytest.mark.parametrize("scene,method,order", [
     ("damped", "midpoint", 2), ("damped", "rk4", 4), ("damped", "gauss4", 4),
     ("damped", "symplectic-euler", 1),
