@@ -10,7 +10,7 @@ from cosymp.report.style import pair_colors
 from cosymp.scenes import SCENES
 from cosymp.workprecision import ROUNDOFF, roundoff_bound
 
-from ..plotting import SLOTS, fmt, series, swatch
+from ..plotting import PATH_POINTS, SLOTS, fmt, series, swatch
 
 EMPTY = np.empty(0)
 
@@ -237,8 +237,9 @@ def ended(run, T):
 
 
 TAIL = 0.02  # the last part of a run drawn bold over its whole orbit in the portraits
-PORTRAIT_MARKS = (f"Portraits: a dot at the start, the last {TAIL:.0%} of each run bold; an orbit of fewer than "
-                  "about ten points a turn is drawn as its points, not as chords between them.")  # said below them
+PORTRAIT_MARKS = (f"Portraits: a dot at the start, the last {TAIL:.0%} of each run bold; an orbit drawn with fewer "
+                  f"than about ten points a turn (a coarse step, or a long run's {PATH_POINTS} points drawn) is drawn "
+                  "as those points, not as chords between them.")  # said below them
 
 
 def tail(x, y):
