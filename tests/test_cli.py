@@ -279,10 +279,12 @@ def test_a_reference_over_the_cap_gives_its_true_step_count():
     (["report", "paper", "--h", "0.1"], "--h applies"),
     (["report", "paper", "--method", "rk4", "--set", "gamma=1"], "--method, --set apply"),
     (["report", "damped", "--quick", "--no-work-precision"], "--quick, --no-work-precision apply"),
+    (["report", "damped", "--theta", "0.3"], "--theta applies to the methods 'theta' and 'theta-naive'"),
 ])
 def test_a_report_refuses_the_options_it_would_ignore(argv, flags, tmp_path):
-    """The paper report ran its own values whatever --h, --method or --set said, and a scene's report
-    has no long runs for --quick to leave out: each was ignored without a word."""
+    """The paper report ran its own values whatever --h, --method or --set said, a scene's report
+    has no long runs for --quick to leave out, and --theta with neither method taking θ changed
+    nothing: each was ignored without a word."""
     code, out, err = run_cli(*argv, "-o", str(tmp_path / "r.html"))
     assert code == 2 and not out and err.startswith(f"cosymp: {flags}") and err.count("\n") == 1
     assert not (tmp_path / "r.html").exists()
