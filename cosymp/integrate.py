@@ -39,8 +39,8 @@ def check_step(h, T):
             raise InputError(f"T/h = {T / h:.3g} steps exceeds the cap of {MAX_STEPS:.0e}: "
                              f"increase h or shorten T")
         if T / h < 1 - 1e-9:
-            raise InputError(f"h = {h:g} is longer than the horizon T = {T:g}: its one step would end at "
-                             f"t = {h:g}; choose h <= T or a longer T")
+            raise InputError(f"h = {h:.10g} is longer than the horizon T = {T:.10g}: its one step would end at "
+                             f"t = {h:.10g}; choose h <= T or a longer T")
     ratio = T / h
     return max(math.ceil(ratio - 1e-9 * max(1.0, ratio)), 1)
 

@@ -699,6 +699,8 @@ def test_a_step_longer_than_the_horizon_is_refused_not_run_far_past_it():
         code, out, err = run_cli(["run", "decaying", "--h", h, "--T", "1"])
         assert code == 2 and not out and "longer than the horizon T = 1" in err and "choose h <= T or a longer T" in err, err
     assert check_step(1.0 + 1e-12, 1.0) == 1
+    code, out, err = run_cli(["run", "decaying", "--h", "1.0000001", "--T", "1"])
+    assert code == 2 and "h = 1.0000001 is longer than the horizon T = 1:" in err, "h as typed (it read 'h = 1', T = 1)"
 
 
 def test_a_failure_in_the_first_step_is_not_blamed_on_a_zero_step():
