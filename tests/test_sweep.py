@@ -22,7 +22,7 @@ from cosymp.cli import main
 from cosymp.diagnostics import relative_error
 from cosymp.errors import InputError
 from cosymp.integrate import MAX_STEPS, Setup, simulate
-from cosymp.reference import scipy_reference
+from cosymp.reference import fine_steps, scipy_reference
 
 RK4_LIMIT = 2 * math.sqrt(2)
 
@@ -63,6 +63,9 @@ def test_linear_axis_values():
     assert sweep.Axis.parse("eps=0.3:0.3:1").values == (0.3,)
     assert all(isinstance(v, float) for v in a.values)
     assert sweep.Axis.parse("eps=0:0.8:5").values == (0.0, 0.2, 0.4, 0.6, 0.8), "no 0.6000000000000001"
+    assert sweep.Axis.parse("eps=0:0.12345678901234568:2").values[-1] == 0.12345678901234568, "the ends as typed"
+    with pytest.raises(InputError, match="not all different at 15 digits"):  # they were rounded into duplicates
+        sweep.Axis.parse("eps=1:1.000000000000001:3")
     assert sweep.Axis.parse("h=1e-3:1:4:log").values == (1e-3, 1e-2, 1e-1, 1.0)
 
 
@@ -518,7 +521,8 @@ def test_write_read_round_trip(suffix, tmp_path, inprocess):
     cols = sweep.read(path)
     assert list(cols) == ["h", "eps", "t_final", *sweep.MEASURES, "status"]
     assert all(len(v) == p.size for v in cols.values())
-    assert np.array_equal(cols["t_final"], [math.ceil(p.T / h - 1e-9) * h for h in cols["h"]])
+    ends = [math.ceil(p.T / h - 1e-9) * h if ok == "ok" else math.nan for h, ok in zip(cols["h"], cols["status"])]
+    assert np.array_equal(np.array(cols["t_final"], float), ends, equal_nan=True) and "ok" in cols["status"]
     idx = np.unravel_index(np.arange(p.size), p.shape)
     assert np.array_equal(cols["h"], np.array(p.axes[0].values)[idx[0]])
     assert np.array_equal(cols["eps"], np.array(p.axes[1].values)[idx[1]])
@@ -705,6 +709,30 @@ def test_a_horizon_that_is_not_a_whole_number_of_steps_says_where_its_runs_ended
     assert "9 points ran past T, up to 0.09 beyond it" in sweep.summary(r)
     on_grid = sweep.run(sweep.plan("decaying", "midpoint", ["T=49.6:49.7:2"], ("error_final",), h=0.1))
     assert "past T" not in sweep.summary(on_grid)
+
+
+def test_a_failed_point_did_not_run_past_t():
+    """RK4 at h = 3 and 3.5 leaves its stability limit (2.83) and overflows within a few hundred steps:
+    its rows said t_final = T rounded up to whole steps, and the summary counted them among the points
+    that ran past T."""
+    r = sweep.run(sweep.plan("modulated", "rk4", ["h=2.5:3.5:3"], ("growth",), T=10000.3, values={"eps": 0.0}))
+    assert list(r.status == "ok") == [True, False, False]
+    assert r.t_final()[0] == pytest.approx(4001 * 2.5) and np.isnan(r.t_final()[1:]).all()
+    assert "  1 point ran past T, up to 2.2 beyond it" in sweep.summary(r)
+
+
+def test_the_reference_cap_is_checked_inside_the_h_axis_not_at_its_corners_only():
+    """The reference takes k rk8 steps per step h, k = h / (2% of the time scale) rounded up to an even
+    number: at an h axis' middle it can take more steps than at both of its ends, and such a sweep ran
+    for minutes before failing there."""
+    setup = Setup.make("modulated", "midpoint", {})
+    unit = 0.02 * setup.scene.time_scale
+    hs_, T = (2 * unit, 3 * unit, 4 * unit), 0.9 * MAX_STEPS * unit
+    counts = [fine_steps(setup, h, T) for h in hs_]
+    assert counts[0] <= MAX_STEPS and counts[2] <= MAX_STEPS < counts[1], counts  # the premise
+    with pytest.raises(InputError, match="over the cap"):
+        sweep.plan("modulated", "midpoint", [sweep.Axis("h", hs_)], ("error_final",), T=T)
+    assert sweep.plan("modulated", "midpoint", [sweep.Axis("h", hs_)], ("growth",), T=T).size == 3
 
 
 @pytest.mark.parametrize("values, name", [({"beta": "constant"}, "eps"), ({"beta": "0.05*(1+t)"}, "B0")])
