@@ -233,6 +233,15 @@ def test_rk8_is_never_measured_against_itself(scene, h, T):
     assert 0 < res["reference_uncertainty"] < 1e-13
 
 
+def test_an_error_below_the_references_own_is_said_to_be_unresolved():
+    """rk8 at h = 0.02 on modulated: its error, 1.9e-15, is below its reference's own uncertainty (7e-15,
+    the round-off of 1000 rk8 steps); the line gave both numbers without saying the first means nothing."""
+    code, out, err = run_cli("run", "modulated", "--method", "rk8", "--h", "0.02", "--T", "10")
+    assert code == 0 and "larger: the run's error is not resolved)" in out, out + err
+    code, out, _err = run_cli("run", "modulated", "--method", "rk4", "--h", "0.1", "--T", "10")
+    assert code == 0 and "(the reference's own, estimated:" in out and "not resolved" not in out, out
+
+
 def test_a_reference_over_the_step_cap_is_refused_before_the_run(monkeypatch):
     import cosymp.summary
 
