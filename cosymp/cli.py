@@ -154,11 +154,13 @@ def _run(args, out):
               f"  max |M^T J M - J|      = {res['symp_max_dev']:.3e}"]
     if res["error_final"] is not None:
         unc = res["reference_uncertainty"]
-        below = unc is not None and res["error_final"] < unc
-        lines.append(f"  relative error at T vs {res['reference']} = {res['error_final']:.3e}"
-                     + ("" if unc == 0 else f" (the reference's own, estimated: {unc:.1e}"
-                        + ("; larger: the run's error is not resolved)" if below else ")") if unc is not None
-                        else " (the reference's own: unknown, its check at twice its step failed)"))
+        own = ""  # an exact flow's, 0, goes unsaid
+        if unc is None:
+            own = " (the reference's own: unknown, its check at twice its step failed)"
+        elif unc > 0:
+            own = (f" (the reference's own, estimated: {unc:.1e}"
+                   + ("; larger: the run's error is not resolved)" if res["error_final"] < unc else ")"))
+        lines.append(f"  relative error at T vs {res['reference']} = {res['error_final']:.3e}{own}")
     lines.append(f"  integration time {res['wall_s']:.3f} s (total {res['wall_total_s']:.3f} s)")
     out.write("\n".join(lines) + "\n")
 

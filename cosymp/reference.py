@@ -44,24 +44,23 @@ def fine_steps(setup, h, T):
     return check_step(h, T) * refinement(setup, h)
 
 
-def reference_states(setup, h, T, z0=None, skip=""):
+def reference_states(setup, h, T, z0=None):
     """(states, label) of a fine rk8 run of setup's scene and parameters from z0 (the scene's
     initial condition by default), at every multiple of h up to the run's final time steps*h:
     states (steps + 1, 2n), its step h/k no larger than 2% of the scene's time scale; label says
-    which reference it is. For the scenes without an exact flow; failures and skip as for
-    reference_final."""
+    which reference it is. For the scenes without an exact flow; failures as for reference_final."""
     steps = check_step(h, T)
-    check_reference(setup, h, T, skip)
+    check_reference(setup, h, T)
     k = refinement(setup, h)
-    run = _fine_run(setup, h, k, steps * h, z0, k, skip)
+    run = _fine_run(Setup.make(setup.scene, "rk8", setup.values), h, k, steps * h, z0, k, "")
     return run.z[:, 0], f"rk8 at h/{k}"
 
 
-def _fine_run(setup, h, k, t_final, z0, stride, skip):
-    """simulate rk8 at h/k to t_final; a failure is said to be the reference's (its step count
-    and "reduce h" were the run's words, not the reference's)."""
+def _fine_run(fine, h, k, t_final, z0, stride, skip):
+    """simulate the rk8 setup `fine` at h/k to t_final; a failure is said to be the reference's
+    (its step count and "reduce h" were the run's words, not the reference's)."""
     try:
-        return simulate(Setup.make(setup.scene, "rk8", setup.values), h / k, t_final, z0=z0, stride=stride)
+        return simulate(fine, h / k, t_final, z0=z0, stride=stride)
     except RunError as e:
         what = "leaves floating-point range (|z| > 1.8e308)" if str(e).startswith("overflow") else "fails"
         raise _failed(f"rk8 at h/{k}", what, e, skip) from None
@@ -96,11 +95,12 @@ def reference_final(setup, h, T, z0=None, uncertainty=True, skip=""):
         return z, np.zeros(z.shape[0])
     check_reference(setup, h, T, skip)
     k = refinement(setup, h)
-    a = _fine_run(setup, h, k, t_final, z0, steps * k, skip)
+    fine = Setup.make(setup.scene, "rk8", setup.values)
+    a = _fine_run(fine, h, k, t_final, z0, steps * k, skip)
     spread = np.full(a.z.shape[1], np.nan)
     if uncertainty:
         try:
-            b = _fine_run(setup, h, k // 2, t_final, z0, steps * k // 2, skip)
+            b = _fine_run(fine, h, k // 2, t_final, z0, steps * k // 2, skip)
         except RunError:  # the check at twice the step left its stability region: the uncertainty is unknown
             return a.z[-1], spread
         rounding = np.finfo(float).eps * math.sqrt(steps * k) * norm(a.z[-1])
