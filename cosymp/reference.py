@@ -4,7 +4,7 @@ import math
 import numpy as np
 
 from . import warm
-from .diagnostics import norm
+from .diagnostics import distance, norm
 from .errors import InputError, RunError
 from .integrate import MAX_STEPS, Setup, check_step, exact_flow, initial_states, simulate
 from .kernels.loops import energies, vector_field
@@ -18,7 +18,7 @@ def check_reference(setup, h, T, skip=""):
     at T out (the run's --no-error), said after "shorten T"."""
     fine = fine_steps(setup, h, T)
     if not fine <= MAX_STEPS:
-        count = f"{fine:.3g}" if math.isfinite(fine) else "more than 1e+300"
+        count = f"{fine:.3g}" if math.isfinite(fine) else "more than 1.8e+308"
         raise InputError(f"the reference for this run would take {count} steps of rk8 (at most "
                          f"{REFERENCE_FRACTION:g} of the scene's time scale and half of h each), over the cap "
                          f"of {MAX_STEPS:.0e}: shorten T" + (f", or {skip}" if skip else ""))
@@ -38,10 +38,11 @@ def refinement(setup, h):
 
 def fine_steps(setup, h, T):
     """How many rk8 steps the reference of a run of setup with step h to T takes (0 with an exact
-    flow): refinement(setup, h) of them per step h."""
+    flow): refinement(setup, h) of them per step h. A float: inf past floating point (an exact
+    count of steps that large has no float to be compared or printed as)."""
     if setup.scene.has_flow:
         return 0
-    return check_step(h, T) * refinement(setup, h)
+    return check_step(h, T) * float(refinement(setup, h))
 
 
 def reference_states(setup, h, T, z0=None):
@@ -56,33 +57,47 @@ def reference_states(setup, h, T, z0=None):
     return run.z[:, 0], f"rk8 at h/{k}"
 
 
-def _fine_run(fine, h, k, t_final, z0, stride, skip):
-    """simulate the rk8 setup `fine` at h/k to t_final; a failure is said to be the reference's
-    (its step count and "reduce h" were the run's words, not the reference's)."""
+OVERFLOWS = "leaves floating-point range (|z| > 1.8e308)"
+
+
+def _fine_run(fine, h, k, t_final, z0, stride, skip, checks=0):
+    """simulate the rk8 setup `fine` at h/k to t_final: the reference, or with checks = the
+    reference's k (= 2k) its check at twice its step. rk8 is explicit: its one failure is overflow,
+    a RunError said to be the reference's (skip as for check_reference)."""
     try:
         return simulate(fine, h / k, t_final, z0=z0, stride=stride)
     except RunError as e:
-        what = "leaves floating-point range (|z| > 1.8e308)" if str(e).startswith("overflow") else "fails"
-        raise _failed(f"rk8 at h/{k}", what, e, skip) from None
+        if not checks:
+            raise _failed(f"rk8 at h/{k}, {OVERFLOWS}", e, h, skip) from None
+        raise _failed(f"rk8 at h/{checks}, cannot be checked: rk8 at twice its step {OVERFLOWS}", e, h, skip,
+                      ", so the reference is near the edge of its stability region there, where its accuracy "
+                      "is gone") from None
 
 
-def _failed(reference, what, e, skip):
-    """The RunError of a reference that failed as e did, worded as the reference's."""
-    return RunError(f"the reference for the error at T, {reference}, {what} at t ≈ {e.time:.6g}: shorten T below it"
+def _failed(what, e, h, skip, why=""):
+    """The RunError of a reference that failed as e did, worded as the reference's (a run's step
+    count and "reduce h" are not its words), with the longest T whose whole steps of h end
+    before it failed (T is rounded up to whole steps: a T below the failure can still reach it)."""
+    whole = math.floor(e.time / h * (1 + 1e-12))
+    shorten = f"shorten T to at most {whole * h:.10g}" if whole >= 1 else f"shorten h and T below t = {e.time:.6g}"
+    return RunError(f"the reference for the error at T, {what} at t ≈ {e.time:.6g}{why}: {shorten}"
                     + (f", or {skip}" if skip else ""), e.time, e.step)
 
 
-def reference_final(setup, h, T, z0=None, uncertainty=True, skip=""):
+def reference_final(setup, h, T, z0=None, skip=""):
     """(z at the run's final time steps*h, uncertainty) for a run of setup with step h to T.
 
     Exact flow: one exact step over the whole horizon, split where a step fails down to 2^-30 of it
     (integrate.exact_flow: the damped oscillator's one-step map passes floating point at γ T = 709,
     its state only at γ T = 1420; a step of h could fail where the state did not), uncertainty 0.
-    Otherwise rk8 at the step h/k of `refinement`; its uncertainty (NaN when not asked for, or where
-    its check fails) is Richardson's estimate of its error from rk8 at twice that step,
-    |z_k - z_(k/2)| / (2^8 - 1), or the round-off of its steps, eps sqrt(steps) |z|, where that is
-    larger. RunError, saying it is the reference's, where the reference itself cannot go on; skip
-    as for check_reference.
+    Otherwise rk8 at the step h/k of `refinement`; its uncertainty is Richardson's estimate of its
+    error from rk8 at twice that step (its check), |z_k - z_(k/2)| / (2^8 - 1), or the round-off of
+    its steps, eps sqrt(steps) |z|, where that is larger. RunError, saying it is the reference's,
+    where the check cannot go on (run first: it leaves rk8's stability region first): rk8 at twice
+    the step leaving that region puts the reference within a factor 2 of its edge, where its
+    accuracy is gone (charged, beta = exp(t), h = 0.001, T = 8.5: rk8 at h/2 was 78 % off rk8 at
+    h/16, and midpoint's error read 3.47 against 0.82), or where the reference itself cannot.
+    skip as for check_reference.
     """
     steps = check_step(h, T)
     t_final = steps * h
@@ -91,21 +106,15 @@ def reference_final(setup, h, T, z0=None, uncertainty=True, skip=""):
         try:
             z, _ = exact_flow(exact, initial_states(setup, z0), None, 0.0, t_final, t_final * 2.0 ** -30)
         except RunError as e:
-            raise _failed("the exact flow", "leaves floating-point range (|z| > 1.8e308)", e, skip) from None
+            raise _failed(f"the exact flow, {OVERFLOWS}", e, h, skip) from None
         return z, np.zeros(z.shape[0])
     check_reference(setup, h, T, skip)
     k = refinement(setup, h)
     fine = Setup.make(setup.scene, "rk8", setup.values)
+    b = _fine_run(fine, h, k // 2, t_final, z0, steps * k // 2, skip, checks=k)
     a = _fine_run(fine, h, k, t_final, z0, steps * k, skip)
-    spread = np.full(a.z.shape[1], np.nan)
-    if uncertainty:
-        try:
-            b = _fine_run(fine, h, k // 2, t_final, z0, steps * k // 2, skip)
-        except RunError:  # the check at twice the step left its stability region: the uncertainty is unknown
-            return a.z[-1], spread
-        rounding = np.finfo(float).eps * math.sqrt(steps * k) * norm(a.z[-1])
-        spread = np.maximum(norm(a.z[-1] - b.z[-1]) / (2 ** 8 - 1), rounding)
-    return a.z[-1], spread
+    rounding = np.finfo(float).eps * math.sqrt(steps * k) * norm(a.z[-1])
+    return a.z[-1], np.maximum(distance(a.z[-1], b.z[-1]) / (2 ** 8 - 1), rounding)
 
 
 def scipy_reference(setup, T, z0=None, rtol=1e-13, atol=1e-13, t_eval=None, method="DOP853"):

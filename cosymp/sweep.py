@@ -230,33 +230,39 @@ def plan(scene, method, axes, measures=("growth",), values=None, theta=None, h=N
 
 
 def figures(setup, h, T, measures):
-    """(the measures at one point, status) for one run (see the module's definitions)."""
+    """(the measures at one point, status, t_final) for one run (see the module's definitions).
+    A run that ended at its final time keeps its measures and t_final where only its reference
+    failed (error_final NaN, the reference's message the status)."""
     out = dict.fromkeys(measures, math.nan)
     try:
         steps = check_step(h, T)
         s, growth = scan(setup, h, steps, with_det="det_max_dev" in measures, growth="growth" in measures,
                          energy="H_ext_max_abs" in measures)
-        out["H_ext_max_abs"], out["det_max_dev"] = s.H_ext_max_abs, s.det_max_dev
-        if growth is not None:
-            out["growth"] = growth.log_norm() / (steps * h)
-        if "error_final" in measures:
-            zr = reference_final(setup, h, T, uncertainty=False, skip=SKIP_ERROR)[0]
-            out["error_final"] = relative_error(s.z, zr[0])[0]
     except CosympError as e:
-        return {k: math.nan for k in measures}, str(e)
-    return {k: out[k] for k in measures}, "ok"
+        return out, str(e), math.nan
+    out["H_ext_max_abs"], out["det_max_dev"] = s.H_ext_max_abs, s.det_max_dev
+    if growth is not None:
+        out["growth"] = growth.log_norm() / (steps * h)
+    status = "ok"
+    if "error_final" in measures:
+        try:
+            zr = reference_final(setup, h, T, skip=SKIP_ERROR)[0]
+            out["error_final"] = relative_error(s.z, zr[0])[0]
+        except CosympError as e:
+            status = str(e)
+    return {k: out[k] for k in measures}, status, steps * h
 
 
 def evaluate(p, indices, stop=None):
-    """Figures of the points at flat indices, in order: (indices, {measure: array}, statuses,
-    seconds). Stops early (fewer points) once `stop` (a threading.Event) is set. Consecutive
+    """Figures of the points at flat indices, in order: (indices, {measure: array, and t_final},
+    statuses, seconds). Stops early (fewer points) once `stop` (a threading.Event) is set. Consecutive
     points that share a run (h, T, theta) and differ in scene parameters run BATCH at a time in
     one compiled call (drive.batch_runs) where the measures allow it; the others, and any point
     of a batch that failed (for its message), one by one (figures)."""
     start = time.perf_counter()
     indices = np.asarray(list(indices), dtype=np.int64)
     cols = p.columns(indices)
-    out = {k: np.full(len(indices), math.nan) for k in p.measures}
+    out = {k: np.full(len(indices), math.nan) for k in (*p.measures, "t_final")}
     statuses = []
     batched = _batched(p)
     pos = 0
@@ -265,8 +271,8 @@ def evaluate(p, indices, stop=None):
             break
         part = {name: c[pos:end] for name, c in cols.items()}
         results = _batch_figures(p, part) if batched else _each_figures(p, part)
-        for k in p.measures:
-            out[k][pos:end] = results[0][k]
+        for k, column in out.items():
+            column[pos:end] = results[0][k]
         statuses.extend(results[1])
         pos = end
     return (indices[:pos].tolist(), {k: v[:pos] for k, v in out.items()}, statuses,
@@ -292,14 +298,16 @@ def _point_figures(p, point):
         setup, h, T = p.run_of(point)
         return figures(setup, h, T, p.measures)
     except InputError as e:
-        return {k: math.nan for k in p.measures}, str(e)
+        return {k: math.nan for k in p.measures}, str(e), math.nan
 
 
 def _each_figures(p, cols):
-    """({measure: array}, statuses) of the points of cols, one run each."""
+    """({measure: array, and t_final}, statuses) of the points of cols, one run each."""
     names = list(cols)
     results = [_point_figures(p, dict(zip(names, vals))) for vals in zip(*(cols[n].tolist() for n in names))]
-    return {k: np.array([r[0][k] for r in results], dtype=float) for k in p.measures}, [r[1] for r in results]
+    out = {k: np.array([r[0][k] for r in results], dtype=float) for k in p.measures}
+    out["t_final"] = np.array([r[2] for r in results], dtype=float)
+    return out, [r[1] for r in results]
 
 
 def _batched(p):
@@ -315,7 +323,7 @@ def _batched(p):
 
 
 def _batch_figures(p, cols):
-    """({measure: array}, statuses) of points sharing a run, from one compiled call; a failed
+    """({measure: array, and t_final}, statuses) of points sharing a run, from one compiled call; a failed
     point is run again on its own for its message. The parameter rows and initial states are
     the first point's, with the varied scene parameters' columns replaced (drive.batchable: the
     scene's parameter tuple holds its parameters by name); the plan checked the grid's corners
@@ -340,10 +348,11 @@ def _batch_figures(p, cols):
     if "growth" in p.measures:
         values["growth"] = out["growth"] / (steps * h)
     values = {k: np.array(values[k], dtype=float) for k in p.measures}
+    values["t_final"] = np.full(size, steps * h)
     statuses = ["ok"] * size
     names = list(cols)
     for j in np.flatnonzero(out["failed"]):
-        figs, statuses[j] = _point_figures(p, {n: float(cols[n][j]) for n in names})
+        figs, statuses[j], values["t_final"][j] = _point_figures(p, {n: float(cols[n][j]) for n in names})
         for k in p.measures:
             values[k][j] = figs[k]
     return values, statuses
@@ -359,6 +368,7 @@ class Result:
     plan: Plan
     values: dict
     status: np.ndarray
+    ends: np.ndarray
     wall_s: float
     where: str
     workers: int
@@ -367,22 +377,18 @@ class Result:
 
     def columns(self):
         """{name: list} over the points in C order: the varied names, t_final (where each run ended:
-        T rounded up to a whole number of steps of h; NaN where it failed), the measures, status."""
+        T rounded up to a whole number of steps of h; NaN where the run failed), the measures, status."""
         cols = {name: c.tolist() for name, c in self.plan.columns(np.arange(self.plan.size)).items()}
-        cols["t_final"] = self.t_final(cols).tolist()
+        cols["t_final"] = self.t_final().tolist()
         cols.update({k: self.values[k].ravel().tolist() for k in self.plan.measures})
         cols["status"] = self.status.ravel().tolist()
         return cols
 
-    def t_final(self, cols=None):
+    def t_final(self):
         """(points,) array of where each point's run ended, steps * h: past T where T is not a whole
-        number of steps of h (a row labelled T = 49.61 at h = 0.1 ran to 49.7); NaN where it failed
-        (its status says where it stopped)."""
-        cols = cols or {name: c.tolist() for name, c in self.plan.columns(np.arange(self.plan.size)).items()}
-        size = self.plan.size
-        pairs = list(zip(cols.get("h", [self.plan.h] * size), cols.get("T", [self.plan.T] * size)))
-        ends = {(h, T): check_step(h, T) * h for h, T in set(pairs)}
-        return np.where(self.status.ravel() == "ok", [ends[pair] for pair in pairs], math.nan)
+        number of steps of h (a row labelled T = 49.61 at h = 0.1 ran to 49.7); NaN where the run
+        failed (its status says where it stopped; a point whose reference failed ran to its end)."""
+        return self.ends.ravel()
 
     def failures(self):
         """(how many points failed, the first failure's message or None)."""
@@ -508,15 +514,16 @@ def _dask(p, seconds_per_point, workers, scheduler, report):
 
 
 def _assemble(p, parts, wall, where, width, task_seconds, spread_s):
-    values = {k: np.full(p.size, np.nan) for k in p.measures}
+    values = {k: np.full(p.size, np.nan) for k in (*p.measures, "t_final")}
     status = np.full(p.size, "not computed", dtype=object)
     for indices, cols, statuses, _ in parts:
         idx = np.asarray(indices, dtype=np.intp)
-        for k in p.measures:
-            values[k][idx] = cols[k]
+        for k, column in values.items():
+            column[idx] = cols[k]
         status[idx] = statuses
-    return Result(p, {k: v.reshape(p.shape) for k, v in values.items()}, status.reshape(p.shape), wall,
-                  where, width, task_seconds, spread_s)
+    ends = values.pop("t_final")
+    return Result(p, {k: v.reshape(p.shape) for k, v in values.items()}, status.reshape(p.shape), ends.reshape(p.shape),
+                  wall, where, width, task_seconds, spread_s)
 
 
 def write(result, path):
@@ -578,7 +585,7 @@ def summary(result):
         lines.append(f"  {k}: min {np.nanmin(v):.4g}, max {np.nanmax(v):.4g} (at {at})")
     cols = {name: c.tolist() for name, c in p.columns(np.arange(p.size)).items()}
     T = np.asarray(cols.get("T", [p.T] * p.size), float)
-    past = result.t_final(cols) - T
+    past = result.t_final() - T
     beyond = past > 1e-9 * T  # NaN, a failed point, is not
     if beyond.any():
         lines.append(f"  {beyond.sum()} point{'s' if beyond.sum() > 1 else ''} ran past T, up to {past[beyond].max():.4g} "

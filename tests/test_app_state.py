@@ -739,8 +739,9 @@ def test_a_reference_that_overflows_leaves_the_comparison_shown_without_errors()
     assert midpoint.comparison.setup.values["beta"] == "exp(t)" and not midpoint.failure
     assert midpoint.comparison.run.t[-1] == pytest.approx(s.T) and "overflow" in rk4.failure
     stopped = re.fullmatch(r"the reference for the error at T, rk8 at h/2, leaves floating-point range \(\|z\| > "
-                           r"1\.8e308\) at t ≈ ([0-9.]+): shorten T below it", r.reference_failure)
+                           r"1\.8e308\) at t ≈ ([0-9.]+): shorten T to at most ([0-9.]+)", r.reference_failure)
     assert stopped and 8 < float(stopped[1]) < 9 and all(e.final_error is None for e in r.entries)
+    assert float(stopped[1]) - s.h < float(stopped[2]) <= float(stopped[1])
     assert s.message.level == "warning" and "no error is measured: the reference for the error at T" in s.message.text
 
 

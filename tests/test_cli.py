@@ -2,6 +2,7 @@
 import io
 import json
 import math
+import re
 import subprocess
 import sys
 
@@ -254,27 +255,53 @@ def test_a_reference_over_the_step_cap_is_refused_before_the_run(monkeypatch):
     assert "over the cap" in err and "--no-error" in err and err.count("\n") == 1
 
 
-def test_a_reference_whose_check_overflows_has_an_unknown_uncertainty_not_a_failed_run():
-    """beta(t) = exp(t): the reference, rk8 at h/2, reaches T = 8.5 (it overflows near 8.87), its check at
-    twice its step (rk8 at h) overflows at 8.25. That check failed the whole run, with an overflow message
-    counting the check's steps; its uncertainty is now unknown (null in JSON) and said so."""
-    argv = ("run", "charged", "--set", "beta=exp(t)", "--T", "8.5")
-    code, out, err = run_cli(*argv, "--json")
-    assert code == 0, err
-    res = _strict(out)
-    assert res["reference"] == "rk8 at h/2" and res["reference_uncertainty"] is None
-    assert math.isfinite(res["error_final"])
-    code, out, err = run_cli(*argv)
-    assert code == 0 and "(the reference's own: unknown, its check at twice its step failed)" in out
+def _longest_t(err):
+    """The T a reference failure's message names ("shorten T to at most X") and where it failed."""
+    found = re.search(r"at t ≈ ([0-9.]+).*shorten T to at most ([0-9.]+)", err)
+    return float(found[2]), float(found[1])
 
 
-def test_a_reference_that_fails_says_it_is_the_reference():
-    """To T = 9 the reference itself overflows (t = 8.87) where midpoint does not: the message said
-    "overflow in step 17735 ... reduce h", the reference's step count and a step the user does not set."""
-    code, out, err = run_cli("run", "charged", "--set", "beta=exp(t)", "--T", "9")
+def test_a_reference_whose_check_overflows_gives_no_error():
+    """beta(t) = exp(t), h = 0.001: the reference, rk8 at h/2, reaches T = 8.5 (it overflows near 8.87),
+    its check at twice its step (rk8 at h) overflows at 8.25. That check failed the whole run with the
+    check's step count; then the uncertainty was called unknown and midpoint's error printed as 3.47,
+    while rk8 at h/16 (converged against h/8) puts it at 0.82: the reference was 78 % off, as rk8
+    within a factor 2 of its stability region's edge is. Now no error is given and T is named."""
+    code, out, err = run_cli("run", "charged", "--set", "beta=exp(t)", "--T", "8.5")
     assert code == 3 and not out and err.count("\n") == 1
-    assert err.startswith("cosymp: the reference for the error at T, rk8 at h/2, leaves floating-point range")
-    assert "at t ≈ 8.8" in err and err.rstrip().endswith("shorten T below it, or skip the error at T (--no-error)")
+    assert err.startswith("cosymp: the reference for the error at T, rk8 at h/2, cannot be checked: rk8 at twice "
+                          "its step leaves floating-point range")
+    longest, failed = _longest_t(err)
+    assert 8.2 < longest <= failed < longest + 0.001 and "or skip the error at T (--no-error)" in err
+    code, out, err = run_cli("run", "charged", "--set", "beta=exp(t)", "--T", str(longest), "--json")
+    assert code == 0, err
+    assert _strict(out)["reference_uncertainty"] is not None
+
+
+def test_an_error_below_a_huge_reference_uncertainty_is_not_resolved():
+    """At T = 8.2 the check at twice the step survives, 93 orders of magnitude away from the reference:
+    the error is printed with that estimate and said not to be resolved."""
+    code, out, _ = run_cli("run", "charged", "--set", "beta=exp(t)", "--T", "8.2")
+    line = next(x for x in out.splitlines() if "relative error at T" in x)
+    estimate = float(re.search(r"estimated: ([0-9.e+]+)", line)[1])
+    assert code == 0 and estimate > 1e50 and line.endswith("larger: the run's error is not resolved)")
+
+
+@pytest.mark.parametrize("argv, longest", [(("--T", "9"), 8.246), (("--h", "0.3", "--T", "6.05"), 6.0)])
+def test_a_reference_that_fails_says_it_is_the_reference_and_names_a_t_that_works(argv, longest):
+    """To T = 9 the reference itself overflows (t = 8.87) where midpoint does not: the message said
+    "overflow in step 17735 ... reduce h", the reference's step count and a step the user does not set.
+    Its check at twice its step fails first (8.246; at h = 0.3, 6.08), and the message said "shorten T
+    below it": at h = 0.3, T = 6.05 is below 6.08 but runs 21 steps to 6.3. It names the longest T of
+    whole steps before the failure now, and a run to it measures its error."""
+    code, out, err = run_cli("run", "charged", "--set", "beta=exp(t)", *argv)
+    assert code == 3 and not out and err.count("\n") == 1
+    assert err.startswith("cosymp: the reference for the error at T, rk8 at h/")
+    assert "cannot be checked" in err and err.rstrip().endswith(", or skip the error at T (--no-error)")
+    named, failed = _longest_t(err)
+    assert named == pytest.approx(longest) and named <= failed
+    code, out, err = run_cli("run", "charged", "--set", "beta=exp(t)", *argv[:-1], str(named))
+    assert code == 0 and "relative error at T" in out, err
 
 
 def test_a_reference_over_the_cap_gives_its_true_step_count():
@@ -282,6 +309,18 @@ def test_a_reference_over_the_cap_gives_its_true_step_count():
     1e+300 steps" for any count over the cap."""
     code, out, err = run_cli("run", "kapitza", "--h", "3e5", "--T", "3e5")
     assert code == 2 and not out and "would take 1.5e+08 steps of rk8" in err
+
+
+@pytest.mark.parametrize("argv", [("run", "kapitza", "--h", "1e305", "--T", "1e306"),
+                                  ("run", "modulated", "--h", "3e306", "--T", "3e307"),
+                                  ("sweep", "kapitza", "--vary", "h=1e305:2e305:2", "--T", "1e306", "--measure",
+                                   "error_final")])
+def test_a_reference_past_floating_point_is_refused_in_one_line(argv, tmp_path):
+    """The exact step count, an integer past 1.8e308, was compared as a float: a traceback
+    (OverflowError: int too large to convert to float), exit 1."""
+    code, out, err = run_cli(*argv, *(("-o", str(tmp_path / "s.csv")) if argv[0] == "sweep" else ()))
+    assert code == 2 and not out and err.count("\n") == 1
+    assert "would take more than 1.8e+308 steps of rk8" in err
 
 
 @pytest.mark.parametrize("argv, flags", [

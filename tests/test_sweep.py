@@ -318,21 +318,37 @@ def test_error_final_where_one_exact_step_over_T_overflows():
         assert 1e-6 < error < 0.1 and error == pytest.approx(relative_error(run, exact)[0], rel=1e-5)
 
 
-def test_a_sweeps_reference_is_one_rk8_run_and_its_refusal_names_the_sweeps_way_out(monkeypatch):
-    """A point's error_final takes one reference run (its uncertainty, a second run at twice the step, is
-    not used: it doubled the reference's cost); a reference over the cap named --no-error, which only
+def test_a_sweeps_reference_is_checked_and_its_refusal_names_the_sweeps_way_out(monkeypatch):
+    """A point's error_final runs its reference and the reference's check at twice its step (left out
+    for a while to halve the cost: then a reference past its stability region's edge gave an error of
+    3.47 where it is 0.82, with status ok); a reference over the cap named --no-error, which only
     `cosymp run` has."""
     from cosymp import reference
 
     calls = []
     fine_run = reference._fine_run
-    monkeypatch.setattr(reference, "_fine_run", lambda *a: calls.append(a[2]) or fine_run(*a))
+    monkeypatch.setattr(reference, "_fine_run", lambda *a, **kw: calls.append(a[2]) or fine_run(*a, **kw))
     r = sweep.run(sweep.plan("modulated", "midpoint", ["eps=0:0.1:2"], ["error_final"], h=0.1, T=5.0))
     assert list(r.status) == ["ok", "ok"] and all(np.isfinite(r.values["error_final"]))
-    assert len(calls) == 2, "one reference run per point"
+    k = reference.refinement(Setup.make("modulated", "midpoint", {}), 0.1)
+    assert calls == [k // 2, k] * 2, "the check, then the reference, at each point"
     with pytest.raises(InputError) as info:
         sweep.plan("kapitza", "midpoint", ["T=1e5:3e5:2"], ["error_final"])
     assert str(info.value).endswith("shorten T, or measure something other than error_final")
+
+
+def test_a_point_whose_reference_fails_keeps_its_run():
+    """beta(t) = exp(t): midpoint reaches T = 8.5 and 9; the reference's check fails at 8.25 and the
+    reference itself at 8.87. The points said t_final NaN and growth NaN, as if the run had failed."""
+    r = sweep.run(sweep.plan("charged", "midpoint", ["T=8:9:3"], ("growth", "error_final"),
+                             values={"beta": "exp(t)"}))
+    assert r.status[0] == "ok" and np.isfinite(r.values["error_final"][0])
+    for i, T in ((1, 8.5), (2, 9.0)):
+        assert r.status[i].startswith("the reference for the error at T, rk8 at h/2, cannot be checked")
+        assert r.status[i].endswith("shorten T to at most 8.246, or measure something other than error_final")
+        assert np.isnan(r.values["error_final"][i]) and np.isfinite(r.values["growth"][i])
+        assert r.t_final()[i] == pytest.approx(T)
+    assert "2 points failed" in sweep.summary(r)
 
 
 @pytest.mark.parametrize("scene,method,order", [
