@@ -1,14 +1,17 @@
 """The app's work-precision and long-horizon measurements (app.features.workprecision) and their
 plots, without a server."""
+import asyncio
 import dataclasses
 import html
 import itertools
 import math
+import threading
 import time
 from types import SimpleNamespace
 
 import numpy as np
 import panel as pn
+import param
 import pytest
 
 from app import memory
@@ -355,7 +358,7 @@ def test_a_scene_change_drops_the_rows_of_the_old_scene():
     assert not m.rows and not m.setting and m.job is None
 
 
-def test_the_tab_says_when_the_sidebar_or_its_controls_ask_for_another_measurement_than_the_one_shown():
+def test_the_tab_says_when_the_sidebar_or_its_controls_ask_for_another_measurement_than_the_one_shown(monkeypatch):
     """A measurement starts on its Start button, not on each change: after the sidebar's values or the
     horizon changed, the plots kept the old rows while only the status line named them (the Long run
     and the Stability map said so). Now the tab says what is asked for, until it is measured."""
@@ -375,12 +378,26 @@ def test_the_tab_says_when_the_sidebar_or_its_controls_ask_for_another_measureme
     m.T = 3.0
     assert "Computed before the latest changes" in since.object and "T = 3" in since.object
     assert "press Start work–precision" in since.object and view.since[both.long].object == ""
-    m.running, m.run = True, SimpleNamespace(inputs=m._inputs(), cancelled=False)  # T = 3 measured, no row yet
-    assert m.since() == "", "what is asked for is being measured: no 'cancel this one' for it"
-    m.run = SimpleNamespace(inputs=dataclasses.replace(m._inputs(), T=4.0), cancelled=False)
+    # Start pressed: `running` is set at once, the run begins later in the server's loop (held here), so
+    # the notice was read against the last run's inputs ("cancel this one" of the very measurement asked
+    # for), or raised AttributeError where the rows shown were recalled (no run yet)
+    held, during = [], []
+    monkeypatch.setattr(param.parameterized, "async_executor", held.append)
+    m.param.watch(lambda e: during.append((e.new, m.since(), since.object)), "status")
+    m.start()
+    assert m.running and held and m.since() == "" and since.object == ""
+    asyncio.run(held[0]())
+    assert during and during[0][0].startswith("running") and {d[1:] for d in during} == {("", "")}
+    assert not m.running and m.job.T == 3.0 and m.since() == ""
+    m.run = None  # rows recalled from the server's memory, then Start
+    m.T = 2.0
+    m.start()
+    assert m.running and m.since() == ""
+    m.running, m.run = True, SimpleNamespace(inputs=dataclasses.replace(m._inputs(), T=4.0), cancelled=False,
+                                            finished=threading.Event())
     assert "cancel this one, then press Start work–precision" in m.since()
     m.running, m.run = False, None
-    m.T = 2.0
+    m.T = 3.0
     assert since.object == ""
     s.values = {"lam": 0.5}
     assert "lam = 0.5" in m.since()

@@ -157,6 +157,8 @@ class Measurement(Job):
             return f"they now ask for a measurement that is refused: {err}"
         if key(inputs) == key(self.job):
             return ""
+        if self.running and (self.run is None or self.run.finished.is_set()):
+            return ""  # asked for and not started yet (`running` is set first): the latest inputs run next
         if self.busy and key(inputs) == key(self.run.inputs):  # it is being measured: the status says so
             return ""
         start = f"cancel this one, then press {self.START}" if self.running else f"press {self.START}"
