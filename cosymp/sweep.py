@@ -99,13 +99,20 @@ class Axis:
             values = np.geomspace(start, stop, num)
         else:
             values = np.linspace(start, stop, num)
-        # to 15 significant digits: the binary noise of the spacing (0.6000000000000001 for 0:0.8:5) is
-        # not a value anyone asked for, and it was what the rows and the map's axis said; the ends as typed
-        values = [start] + [float(f"{v:.15g}") for v in values[1:-1]] + [stop] if num > 1 else [start]
-        if len(set(values)) < num:
-            raise InputError(f"{name}: {num} values from {start:.17g} to {stop:.17g} are not all different at 15 "
-                             "digits (the same run twice): use fewer values or a wider range")
+        # to 15 significant digits of the axis (of each value on a log axis): the binary noise of the
+        # spacing (0.6000000000000001 for 0:0.8:5, 1.4e-17 for the 0 of -0.1:0.2:4) is not a value anyone
+        # asked for, and it was what the rows and the map's axis said; the ends as typed
+        scale = max(abs(start), abs(stop))
+        values = ([start] + [_significant(v, v if log else scale) for v in values[1:-1]] + [stop]) if num > 1 else [start]
+        if len({f"{v:.15g}" for v in values}) < num:
+            raise InputError(f"{name}: {num} values from {float(start)!r} to {float(stop)!r} are not all different "
+                             "at 15 digits (the same run twice): use fewer values or a wider range")
         return cls(name, tuple(values), log)
+
+
+def _significant(v, scale):
+    """v rounded to 15 significant digits of scale (> 0 or 0)."""
+    return float(f"{v:.15g}") if scale == 0 else round(float(v), 14 - math.floor(math.log10(abs(scale))))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -178,17 +185,19 @@ def plan(scene, method, axes, measures=("growth",), values=None, theta=None, h=N
     on its last point for a reason known at the start."""
     sc = get_scene(scene) if isinstance(scene, str) else scene
     m = get_method(method) if isinstance(method, str) else method
-    axes = tuple(a if isinstance(a, Axis) else Axis.parse(a) for a in axes)
+    axes = tuple(axes)
     if not axes:
         raise InputError("nothing to sweep: give at least one --vary NAME=START:STOP:NUM")
+    allowed = variables(sc, m)
+    for a in axes:  # the name first: an axis' values say nothing where the name cannot be varied
+        n = a.name if isinstance(a, Axis) else str(a).partition("=")[0].strip()
+        if n and n not in allowed:
+            why = (" (theta applies to the methods 'theta' and 'theta-naive')" if n == "theta" else "")
+            raise InputError(f"cannot vary {quoted(n)} on scene '{sc.name}'{why}: choose from {', '.join(allowed)}")
+    axes = tuple(a if isinstance(a, Axis) else Axis.parse(a) for a in axes)
     names = [a.name for a in axes]
     if len(set(names)) < len(names):
         raise InputError(f"{quoted(max(names, key=names.count))} is varied twice: give each name once")
-    allowed = variables(sc, m)
-    for n in names:
-        if n not in allowed:
-            why = (" (theta applies to the methods 'theta' and 'theta-naive')" if n == "theta" else "")
-            raise InputError(f"cannot vary {quoted(n)} on scene '{sc.name}'{why}: choose from {', '.join(allowed)}")
     measures = tuple(dict.fromkeys([measures] if isinstance(measures, str) else measures))
     for name in measures:
         if name not in MEASURES:
@@ -225,7 +234,10 @@ def plan(scene, method, axes, measures=("growth",), values=None, theta=None, h=N
         # a step inside the h axis can take twice a corner's (at the longest T, where they are most).
         longest = max(next((a.values for a in axes if a.name == "T"), (p.T,)))
         for hh in next((a.values for a in axes if a.name == "h"), (p.h,)):
-            check_reference(setup, hh, longest, SKIP_ERROR)
+            try:
+                check_reference(setup, hh, longest, SKIP_ERROR)
+            except InputError as e:
+                raise InputError(f"at h = {hh:.10g} and T = {longest:.10g}, {e}") from None
     return p
 
 

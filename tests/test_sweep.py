@@ -66,6 +66,13 @@ def test_linear_axis_values():
     assert sweep.Axis.parse("eps=0:0.12345678901234568:2").values[-1] == 0.12345678901234568, "the ends as typed"
     with pytest.raises(InputError, match="not all different at 15 digits"):  # they were rounded into duplicates
         sweep.Axis.parse("eps=1:1.000000000000001:3")
+    with pytest.raises(InputError, match="cannot vary 'eps' on scene 'damped'"):  # the name first, then the values
+        sweep.plan("damped", "midpoint", ["eps=1:1.000000000000001:3"])
+    with pytest.raises(InputError) as info:  # two values passed, equal at 15 digits, as three were refused
+        sweep.Axis.parse("gamma=0.1:0.1000000000000001:2")
+    assert str(info.value).startswith("gamma: 2 values from 0.1 to 0.1000000000000001 are"), "as typed, not .17g"
+    assert sweep.Axis.parse("eps=-0.1:0.2:4").values == (-0.1, 0.0, 0.1, 0.2), "no 1.3877787807814457e-17"
+    assert sweep.Axis.parse("x=1e5:100001:3").values == (1e5, 100000.5, 100001.0)
     assert sweep.Axis.parse("h=1e-3:1:4:log").values == (1e-3, 1e-2, 1e-1, 1.0)
 
 
@@ -746,8 +753,9 @@ def test_the_reference_cap_is_checked_inside_the_h_axis_not_at_its_corners_only(
     hs_, T = (2 * unit, 3 * unit, 4 * unit), 0.9 * MAX_STEPS * unit
     counts = [fine_steps(setup, h, T) for h in hs_]
     assert counts[0] <= MAX_STEPS and counts[2] <= MAX_STEPS < counts[1], counts  # the premise
-    with pytest.raises(InputError, match="over the cap"):
+    with pytest.raises(InputError, match="over the cap") as info:
         sweep.plan("modulated", "midpoint", [sweep.Axis("h", hs_)], ("error_final",), T=T)
+    assert str(info.value).startswith(f"at h = {hs_[1]:.10g} and T = {T:.10g}, the reference for this run")
     assert sweep.plan("modulated", "midpoint", [sweep.Axis("h", hs_)], ("growth",), T=T).size == 3
 
 
