@@ -336,3 +336,17 @@ def test_a_report_refuses_the_options_it_would_ignore(argv, flags, tmp_path):
     code, out, err = run_cli(*argv, "-o", str(tmp_path / "r.html"))
     assert code == 2 and not out and err.startswith(f"cosymp: {flags}") and err.count("\n") == 1
     assert not (tmp_path / "r.html").exists()
+
+
+def test_a_report_whose_reference_fails_is_written_without_errors(tmp_path, recwarn):
+    """beta(t) = exp(t) to T = 9: the reference overflows at t = 8.87. The report computed both runs and
+    then exited 3 with no file, where the app shows the same comparison and says no error is measured;
+    it is written now, with the errors left blank and the reason given, and no NumPy warning on stderr."""
+    path = tmp_path / "r.html"
+    code, _, err = run_cli("report", "charged", "--set", "beta=exp(t)", "--T", "9", "-o", str(path))
+    text = path.read_text()
+    assert code == 0, err
+    assert not [w for w in recwarn if issubclass(w.category, RuntimeWarning)], [str(w.message) for w in recwarn]
+    assert ("No error is measured: the reference for the error at T, rk8 at h/2, leaves floating-point range"
+            in text) and "shorten T to at most 8.8" in text
+    assert "Trajectory error against" not in text

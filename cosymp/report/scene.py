@@ -4,6 +4,7 @@ import shlex
 import numpy as np
 
 from ..diagnostics import ORBIT_ERROR
+from ..errors import RunError
 from ..reference import reference_states
 from ..study import compare_until_failure, with_reference
 from . import Figure, Report, Section, Series, Table
@@ -37,6 +38,7 @@ def scene_report(setups, h, T, cmd, progress=None, computed=None):
     total = 2 * len(setups)
     runs = []
     reference = None
+    unmeasured = ""  # why no error is measured, where the reference failed (the app says it the same way)
     for i, s in enumerate(setups):
         report(2 * i, total, f"{s.method.label(s.theta)}: run and diagnostics")
         if computed is None:
@@ -44,9 +46,13 @@ def scene_report(setups, h, T, cmd, progress=None, computed=None):
         else:
             c, failure = computed[i]
         report(2 * i + 1, total, f"{s.method.label(s.theta)}: reference")
-        if c is not None and c.error is None:  # no exact flow: one reference run serves both methods
-            reference = reference or reference_states(s, h, T)
-            c = with_reference(c, reference[0], h, reference[1])
+        if c is not None and c.error is None and not unmeasured:  # no exact flow: one reference serves both
+            try:
+                reference = reference or reference_states(s, h, T)
+            except RunError as e:
+                unmeasured = f"No error is measured: {e}."
+            else:
+                c = with_reference(c, reference[0], h, reference[1])
         err = float(c.error[-1]) if c is not None and c.error is not None and not failure else None
         runs.append((s, c, failure, err))
     report(total, total, "done")
@@ -77,7 +83,7 @@ def scene_report(setups, h, T, cmd, progress=None, computed=None):
             "it is 0 for every method and its plot is round-off.")], _structure_figures(scene, ok)),
     ]
     return Report(f"cosymp report: {scene.title}, {' vs '.join(s.method.label(s.theta) for s in setups)}",
-                  [f"h = {h:g}, T = {T:g}."], sections, cmd)
+                  [f"h = {h:g}, T = {T:g}.", *([unmeasured] if unmeasured else [])], sections, cmd)
 
 
 def volume_name(scene):
