@@ -263,7 +263,7 @@ def test_an_orbit_of_a_few_points_a_turn_is_drawn_as_its_points():
     s.param.update(h=0.1, T=5000.0)  # 63 steps a turn, 50001 states drawn as 4000: 5 a turn, as dots
     figs = shown_figures(view)
     drawn_a = figs.portraits[0][2]
-    assert drawn_a.marks["A:"].visible and "a long run's 4000 points drawn" in common.PORTRAIT_MARKS
+    assert drawn_a.marks["A:"].visible and "a long run's 4000 points drawn" in view.remark.object, "the caption says why"
     x = drawn_a.sources["A"].data["x"]
     assert len(x) == 4000 and np.isin(x, s.results.entries[0].comparison.run.z[:, 0, 0]).all(), \
         "the dots are the run's own states"
