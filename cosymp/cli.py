@@ -277,7 +277,7 @@ def _report_options(args):
     """InputError for an option the report asked for does not take (it was ignored without a word):
     the paper report runs the paper's own values, only it has long runs and a diagram to leave out,
     and θ is for the methods that take it."""
-    from .methods import method
+    from .methods import THETA_APPLIES, method
 
     if args.target == "paper":
         given = [f"--{name}" for name in ("method", "vs", "h", "T", "theta") if getattr(args, name) is not None]
@@ -286,8 +286,8 @@ def _report_options(args):
         given = [flag for flag, on in (("--quick", args.quick), ("--no-work-precision", args.no_work_precision)) if on]
         names = (args.method or "midpoint", args.vs or "rk4")
         if args.theta is not None and not any(method(m).takes_theta for m in names):
-            raise InputError(f"--theta applies to the methods 'theta' and 'theta-naive', and neither {names[0]} nor "
-                             f"{names[1]} is one: drop it, or choose one with --method or --vs")
+            raise InputError(f"--{THETA_APPLIES}, and neither {names[0]} nor {names[1]} is one: drop it, or choose "
+                             "one with --method or --vs")
     if given:
         what = ("a scene's report (cosymp report SCENE); the paper report runs the paper's own values"
                 if args.target == "paper" else "the paper report (cosymp report paper) only")

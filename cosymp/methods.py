@@ -249,7 +249,7 @@ class Method:
                 raise InputError(f"theta = {theta} is outside [0, 1]: pass --theta between 0 and 1")
             return _data(self.name, float(theta))
         if theta is not None:
-            raise InputError(f"method '{self.name}' takes no theta: use 'theta' or 'theta-naive'")
+            raise InputError(f"method '{self.name}' takes no theta ({THETA_APPLIES}): use one of them, or drop theta")
         return _data(self.name, None)
 
 
@@ -326,6 +326,8 @@ METHODS = {m.name: m for m in (
     Method("exact", "Exact flow", "the scene's closed-form flow", 0, "exact",
            lambda: Exact(_fixed([0.0, 1.0])), requires="flow"),
 )}
+
+THETA_APPLIES = "theta applies to the methods " + " and ".join(f"'{m.name}'" for m in METHODS.values() if m.takes_theta)
 
 
 def applicable(names, scene):

@@ -40,6 +40,7 @@ from .diagnostics import relative_error
 from .drive import batch_runs, batchable
 from .errors import CosympError, InputError, as_number, quoted
 from .integrate import Setup, check_step, get_scene
+from .methods import THETA_APPLIES
 from .methods import method as get_method
 from .reference import check_reference, reference_final
 from .workprecision import check_horizon, scan
@@ -192,7 +193,7 @@ def plan(scene, method, axes, measures=("growth",), values=None, theta=None, h=N
     for a in axes:  # the name first: an axis' values say nothing where the name cannot be varied
         n = a.name if isinstance(a, Axis) else str(a).partition("=")[0].strip()
         if n and n not in allowed:
-            why = (" (theta applies to the methods 'theta' and 'theta-naive')" if n == "theta" else "")
+            why = f" ({THETA_APPLIES})" if n == "theta" else ""
             raise InputError(f"cannot vary {quoted(n)} on scene '{sc.name}'{why}: choose from {', '.join(allowed)}")
     axes = tuple(a if isinstance(a, Axis) else Axis.parse(a) for a in axes)
     names = [a.name for a in axes]

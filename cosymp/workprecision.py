@@ -38,7 +38,7 @@ from .errors import InputError, RunError
 from .integrate import MAX_STEPS, Setup, check_step, exact_flow, get_scene, simulate
 from .kernels.loops import energies
 from .kernels.registry import family
-from .methods import applicable
+from .methods import THETA_APPLIES, applicable
 from .methods import method as get_method
 from .reference import scipy_reference
 
@@ -74,8 +74,7 @@ def _setups(scene, methods, values, theta):
     if "exact" in names:
         raise InputError("'exact' is the reference these runs are measured against: leave it out of the methods")
     if theta is not None and not any(get_method(m).takes_theta for m in names):
-        raise InputError(f"theta = {theta} applies to the methods 'theta' and 'theta-naive' only: add one or "
-                         "drop theta")
+        raise InputError(f"theta = {theta}: {THETA_APPLIES} only: add one or drop theta")
     return scene, [Setup.make(scene, m, values, theta if get_method(m).takes_theta else None)
                    for m in dict.fromkeys(names)]
 
