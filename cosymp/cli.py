@@ -250,7 +250,7 @@ def _report(args, out, err):
         scene = get_scene(args.target)
         values = dict(args.set)
         setups = [Setup.make(scene, m, values, args.theta if method(m).takes_theta else None)
-                  for m in (args.method or "midpoint", args.vs or "rk4")]
+                  for m in _report_methods(args)]
         h = scene.h if args.h is None else args.h
         T = scene.T if args.T is None else args.T
         end = check_step(h, T) * h
@@ -273,6 +273,11 @@ def _report(args, out, err):
     out.write(f"report written to {args.out} ({size / 1e6:.2f} MB)\n")
 
 
+def _report_methods(args):
+    """A scene report's two methods: --method (default midpoint) and --vs (default rk4)."""
+    return args.method or "midpoint", args.vs or "rk4"
+
+
 def _report_options(args):
     """InputError for an option the report asked for does not take (it was ignored without a word):
     the paper report runs the paper's own values, only it has long runs and a diagram to leave out,
@@ -284,7 +289,7 @@ def _report_options(args):
         given += ["--set"] * bool(args.set)
     else:
         given = [flag for flag, on in (("--quick", args.quick), ("--no-work-precision", args.no_work_precision)) if on]
-        names = (args.method or "midpoint", args.vs or "rk4")
+        names = _report_methods(args)
         if args.theta is not None and not any(method(m).takes_theta for m in names):
             raise InputError(f"--{THETA_APPLIES}, and neither {names[0]} nor {names[1]} is one: drop it, or choose "
                              "one with --method or --vs")
