@@ -366,8 +366,8 @@ def test_batched_runs_match_runs_one_by_one(scene, method, names):
     assert done == list(range(p.size)) and statuses == ["ok"] * p.size
     for i in range(p.size):
         setup, h, T = p.run_of(p.point(i))
-        one, status = sweep.figures(setup, h, T, p.measures)
-        assert status == "ok"
+        one, status, end = sweep.figures(setup, h, T, p.measures)
+        assert status == "ok" and cols["t_final"][i] == end
         for k in p.measures:
             assert cols[k][i] == pytest.approx(one[k], rel=1e-12, abs=1e-15), (i, k)
 
@@ -381,4 +381,4 @@ def test_a_failed_point_of_a_batch_gets_its_own_message():
         setup, h, T = p.run_of(p.point(i))
         assert statuses[i] == sweep.figures(setup, h, T, p.measures)[1]
         assert statuses[i].startswith("overflow in step")
-    assert np.all(np.isnan(cols["growth"]))
+    assert np.all(np.isnan(cols["growth"])) and np.all(np.isnan(cols["t_final"]))
