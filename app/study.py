@@ -157,7 +157,7 @@ def run_pair(scene, setups, h, T):
         reference = pool.submit(live_reference, setups[0], h, T)
         done = list(pool.map(lambda s: compare_until_failure(s, h, T), setups))
         # A reference run that stops (overflow) leaves the runs shown without errors: it failed the
-        # whole comparison (charged with beta(t) = exp(t): the fine rk8 run overflows at t = 8.2,
+        # whole comparison (charged with beta(t) = exp(t): the fine rk8 run overflows at t = 8.87,
         # RK4 at 7.6, and midpoint reaches T).
         try:
             reference, stopped = reference.result(), ""

@@ -155,8 +155,8 @@ def _run(args, out):
     if res["error_final"] is not None:
         unc = res["reference_uncertainty"]
         own = ""  # an exact flow's, 0, goes unsaid
-        if unc is None:  # past floating point: its check at twice its step ended that far from it
-            own = " (the reference's own, estimated: beyond 1.8e308; larger: the run's error is not resolved)"
+        if unc is None:  # infinite: its check at twice its step overflowed
+            own = " (the reference's own: unbounded, its check at twice its step overflowed: the run's error is not resolved)"
         elif unc > 0:
             own = (f" (the reference's own, estimated: {unc:.1e}"
                    + ("; larger: the run's error is not resolved)" if res["error_final"] < unc else ")"))

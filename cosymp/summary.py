@@ -114,7 +114,7 @@ def run_summary(setup, h, T, transport_from=None, with_error=True, progress=None
         scale = max(float(norm(zr[0])), np.finfo(float).tiny)  # relative, as the app, reports and sweeps give it
         out["error_final"] = float(distance(z, zr[0])) / scale
         out["reference"] = "exact flow" if setup.scene.has_flow else f"rk8 at h/{refinement(setup, h)}"
-        # None where it is infinite (the check at twice its step ends that far from it): JSON has no inf
+        # None where it is infinite (the check at twice its step overflowed): JSON has no inf
         out["reference_uncertainty"] = float(spread[0]) / scale if np.isfinite(spread[0]) else None
     out["wall_total_s"] = time.perf_counter() - start
     return out

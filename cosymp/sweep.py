@@ -7,13 +7,16 @@ from the scene's initial state with step h to horizon T, and gives the requested
 - H_ext_max_abs: max |H + p_t| over every step (0 for the exact flow of the extended system).
 - det_max_dev: max |det M_k - 1| over the one-step tangent maps M_k of every step.
 - error_final: ||z(T) - z_ref(T)|| / ||z_ref(T)|| over z = (q, p); z_ref the exact flow, else
-  rk8 at a step of at most 2% of the scene's time scale (reference.reference_final).
+  rk8 at a step of at most 2% of the scene's time scale (reference.reference_final), whose own
+  uncertainty, relative as the error is, comes beside it (error_final_uncertainty: where it is
+  the larger, the error is not resolved).
 - growth: ln(sigma_max(M_(N-1) ... M_0)) / T, the largest finite-time growth exponent of the
   method's own map along the run (diagnostics.MapGrowth): 0 for a bounded linear map, the
   Floquet exponent inside a Mathieu tongue, ln|R(ih)|/h for a one-step method with stability
   function R on the harmonic oscillator.
 
-A run that fails (overflow, Newton) leaves NaN measures and its message in `status`. A run takes
+A run that fails (overflow, Newton) leaves NaN measures and its message in `status`; a run whose
+reference fails keeps its other measures and t_final, error_final NaN. A run takes
 T/h rounded up steps of h: where T is not a whole number of them, it ends past T, at t_final (a
 column of the written rows; the summary counts such points).
 
@@ -36,7 +39,7 @@ from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 import numpy as np
 
 from . import warm
-from .diagnostics import relative_error
+from .diagnostics import norm, relative_error
 from .drive import batch_runs, batchable
 from .errors import CosympError, InputError, as_number, quoted
 from .integrate import Setup, check_step, get_scene
@@ -113,7 +116,8 @@ class Axis:
 
 def _significant(v, scale):
     """v rounded to 15 significant digits of scale (> 0 or 0)."""
-    return float(f"{v:.15g}") if scale == 0 else round(float(v), 14 - math.floor(math.log10(abs(scale))))
+    rounded = float(f"{v:.15g}") if scale == 0 else round(float(v), 14 - math.floor(math.log10(abs(scale))))
+    return rounded + 0.0  # -1e-17 rounds to -0.0, written so
 
 
 @dataclasses.dataclass(frozen=True)
@@ -246,7 +250,7 @@ def figures(setup, h, T, measures):
     """(the measures at one point, status, t_final) for one run (see the module's definitions).
     A run that ended at its final time keeps its measures and t_final where only its reference
     failed (error_final NaN, the reference's message the status)."""
-    out = dict.fromkeys(measures, math.nan)
+    out = dict.fromkeys(_columns(measures), math.nan)
     try:
         steps = check_step(h, T)
         s, growth = scan(setup, h, steps, with_det="det_max_dev" in measures, growth="growth" in measures,
@@ -259,11 +263,21 @@ def figures(setup, h, T, measures):
     status = "ok"
     if "error_final" in measures:
         try:
-            zr = reference_final(setup, h, T, skip=SKIP_ERROR)[0]
-            out["error_final"] = relative_error(s.z, zr[0])[0]
+            zr, spread = reference_final(setup, h, T, skip=SKIP_ERROR)
         except CosympError as e:
             status = str(e)
-    return {k: out[k] for k in measures}, status, steps * h
+        else:
+            out["error_final"] = relative_error(s.z, zr[0])[0]
+            out[UNCERTAINTY] = float(spread[0]) / max(float(norm(zr[0])), np.finfo(float).tiny)
+    return {k: out[k] for k in _columns(measures)}, status, steps * h
+
+
+UNCERTAINTY = "error_final_uncertainty"
+
+
+def _columns(measures):
+    """What a point gives beside t_final: its measures, and the uncertainty of error_final's."""
+    return (*measures, *([UNCERTAINTY] if "error_final" in measures else []))
 
 
 def evaluate(p, indices, stop=None):
@@ -275,7 +289,7 @@ def evaluate(p, indices, stop=None):
     start = time.perf_counter()
     indices = np.asarray(list(indices), dtype=np.int64)
     cols = p.columns(indices)
-    out = {k: np.full(len(indices), math.nan) for k in (*p.measures, "t_final")}
+    out = {k: np.full(len(indices), math.nan) for k in (*_columns(p.measures), "t_final")}
     statuses = []
     batched = _batched(p)
     pos = 0
@@ -311,14 +325,14 @@ def _point_figures(p, point):
         setup, h, T = p.run_of(point)
         return figures(setup, h, T, p.measures)
     except InputError as e:
-        return {k: math.nan for k in p.measures}, str(e), math.nan
+        return dict.fromkeys(_columns(p.measures), math.nan), str(e), math.nan
 
 
 def _each_figures(p, cols):
     """({measure: array, and t_final}, statuses) of the points of cols, one run each."""
     names = list(cols)
     results = [_point_figures(p, dict(zip(names, vals))) for vals in zip(*(cols[n].tolist() for n in names))]
-    out = {k: np.array([r[0][k] for r in results], dtype=float) for k in p.measures}
+    out = {k: np.array([r[0][k] for r in results], dtype=float) for k in _columns(p.measures)}
     out["t_final"] = np.array([r[2] for r in results], dtype=float)
     return out, [r[1] for r in results]
 
@@ -390,10 +404,11 @@ class Result:
 
     def columns(self):
         """{name: list} over the points in C order: the varied names, t_final (where each run ended:
-        T rounded up to a whole number of steps of h; NaN where the run failed), the measures, status."""
+        T rounded up to a whole number of steps of h; NaN where the run failed), the measures (with
+        error_final, its reference's uncertainty), status."""
         cols = {name: c.tolist() for name, c in self.plan.columns(np.arange(self.plan.size)).items()}
         cols["t_final"] = self.t_final().tolist()
-        cols.update({k: self.values[k].ravel().tolist() for k in self.plan.measures})
+        cols.update({k: self.values[k].ravel().tolist() for k in _columns(self.plan.measures)})
         cols["status"] = self.status.ravel().tolist()
         return cols
 
@@ -527,7 +542,7 @@ def _dask(p, seconds_per_point, workers, scheduler, report):
 
 
 def _assemble(p, parts, wall, where, width, task_seconds, spread_s):
-    values = {k: np.full(p.size, np.nan) for k in (*p.measures, "t_final")}
+    values = {k: np.full(p.size, np.nan) for k in (*_columns(p.measures), "t_final")}
     status = np.full(p.size, "not computed", dtype=object)
     for indices, cols, statuses, _ in parts:
         idx = np.asarray(indices, dtype=np.intp)
@@ -596,6 +611,11 @@ def summary(result):
         hi = np.unravel_index(np.nanargmax(v), v.shape)
         at = ", ".join(f"{a.name} = {a.values[i]:.4g}" for a, i in zip(p.axes, hi))
         lines.append(f"  {k}: min {np.nanmin(v):.4g}, max {np.nanmax(v):.4g} (at {at})")
+    if "error_final" in p.measures:
+        unresolved = int(np.sum(result.values["error_final"] < result.values[UNCERTAINTY]))
+        if unresolved:
+            lines.append(f"  {unresolved} point{'s' if unresolved > 1 else ''} with error_final below its reference's "
+                         f"own uncertainty: not resolved (the column {UNCERTAINTY})")
     cols = {name: c.tolist() for name, c in p.columns(np.arange(p.size)).items()}
     T = np.asarray(cols.get("T", [p.T] * p.size), float)
     past = result.t_final() - T

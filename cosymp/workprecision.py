@@ -74,7 +74,7 @@ def _setups(scene, methods, values, theta):
     if "exact" in names:
         raise InputError("'exact' is the reference these runs are measured against: leave it out of the methods")
     if theta is not None and not any(get_method(m).takes_theta for m in names):
-        raise InputError(f"theta = {theta}: {THETA_APPLIES} only: add one or drop theta")
+        raise InputError(f"theta = {theta} is given, but {THETA_APPLIES} only: add one or drop theta")
     return scene, [Setup.make(scene, m, values, theta if get_method(m).takes_theta else None)
                    for m in dict.fromkeys(names)]
 

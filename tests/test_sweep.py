@@ -72,6 +72,8 @@ def test_linear_axis_values():
         sweep.Axis.parse("gamma=0.1:0.1000000000000001:2")
     assert str(info.value).startswith("gamma: 2 values from 0.1 to 0.1000000000000001 are"), "as typed, not .17g"
     assert sweep.Axis.parse("eps=-0.1:0.2:4").values == (-0.1, 0.0, 0.1, 0.2), "no 1.3877787807814457e-17"
+    for spec in ("-0.1:0.5:7", "-0.2:0.5:8"):  # the zero rounded from -1e-17 was written -0.0
+        assert all(math.copysign(1, v) > 0 for v in sweep.Axis.parse(f"eps={spec}").values if v == 0), spec
     assert sweep.Axis.parse("x=1e5:100001:3").values == (1e5, 100000.5, 100001.0)
     assert sweep.Axis.parse("h=1e-3:1:4:log").values == (1e-3, 1e-2, 1e-1, 1.0)
 
@@ -326,36 +328,44 @@ def test_error_final_where_one_exact_step_over_T_overflows():
 
 
 def test_a_sweeps_reference_is_checked_and_its_refusal_names_the_sweeps_way_out(monkeypatch):
-    """A point's error_final runs its reference and the reference's check at twice its step (left out
-    for a while to halve the cost: then a reference past its stability region's edge gave an error of
-    3.47 where it is 0.82, with status ok); a reference over the cap named --no-error, which only
+    """A point's error_final runs its reference and the reference's check at twice its step, whose distance
+    is the reference's uncertainty, written beside the error (the check was left out for a while to halve
+    the cost: then a reference past rk8's stability edge gave an error of 3.47 where it is 0.82, with status
+    ok and nothing to say it was not resolved); a reference over the cap named --no-error, which only
     `cosymp run` has."""
     from cosymp import reference
 
-    calls = []
-    fine_run = reference._fine_run
-    monkeypatch.setattr(reference, "_fine_run", lambda *a, **kw: calls.append(a[2]) or fine_run(*a, **kw))
+    steps = []
+    run = reference.simulate
+    monkeypatch.setattr(reference, "simulate", lambda s, h, *a, **kw: steps.append(h) or run(s, h, *a, **kw))
     r = sweep.run(sweep.plan("modulated", "midpoint", ["eps=0:0.1:2"], ["error_final"], h=0.1, T=5.0))
     assert list(r.status) == ["ok", "ok"] and all(np.isfinite(r.values["error_final"]))
     k = reference.refinement(Setup.make("modulated", "midpoint", {}), 0.1)
-    assert calls == [k // 2, k] * 2, "the check, then the reference, at each point"
+    assert steps == pytest.approx([0.1 / k, 0.2 / k] * 2), "the reference, then its check, at each point"
+    assert (0 < r.values["error_final_uncertainty"]).all() and (r.values["error_final_uncertainty"] < 1e-12).all()
     with pytest.raises(InputError) as info:
         sweep.plan("kapitza", "midpoint", ["T=1e5:3e5:2"], ["error_final"])
     assert str(info.value).endswith("shorten T, or measure something other than error_final")
 
 
-def test_a_point_whose_reference_fails_keeps_its_run():
-    """beta(t) = exp(t): midpoint reaches T = 8.5 and 9; the reference's check fails at 8.25 and the
-    reference itself at 8.87. The points said t_final NaN and growth NaN, as if the run had failed."""
+def test_a_point_whose_reference_fails_keeps_its_run_and_an_unbounded_one_is_not_resolved(tmp_path):
+    """beta(t) = exp(t): midpoint reaches T = 8, 8.5 and 9; the reference's check overflows at 8.25 and
+    the reference itself at 8.87. T = 9's row said t_final NaN and growth NaN, as if the run had failed;
+    T = 8.5's error (3.47, where it is 0.82) was written with status ok and nothing beside it."""
     r = sweep.run(sweep.plan("charged", "midpoint", ["T=8:9:3"], ("growth", "error_final"),
                              values={"beta": "exp(t)"}))
-    assert r.status[0] == "ok" and np.isfinite(r.values["error_final"][0])
-    for i, T in ((1, 8.5), (2, 9.0)):
-        assert r.status[i].startswith("the reference for the error at T, rk8 at h/2, cannot be checked")
-        assert r.status[i].endswith("shorten T to at most 8.246, or measure something other than error_final")
-        assert np.isnan(r.values["error_final"][i]) and np.isfinite(r.values["growth"][i])
-        assert r.t_final()[i] == pytest.approx(T)
-    assert "2 points failed" in sweep.summary(r)
+    unc = r.values["error_final_uncertainty"]
+    assert list(r.status[:2]) == ["ok", "ok"] and np.isfinite(unc[0]) and unc[1] == np.inf
+    assert r.status[2].startswith("the reference for the error at T, rk8 at h/2, leaves floating-point range")
+    assert r.status[2].endswith("shorten T to at most 8.867, or measure something other than error_final")
+    assert np.isnan(r.values["error_final"][2]) and np.isfinite(r.values["growth"]).all()
+    assert r.t_final() == pytest.approx([8.0, 8.5, 9.0])
+    text = sweep.summary(r)
+    assert "1 point failed" in text and "1 point with error_final below its reference's own uncertainty" in text
+    path = tmp_path / "s.csv"
+    sweep.write(r, str(path))
+    rows = sweep.read(str(path))
+    assert rows["error_final_uncertainty"][1] == math.inf and rows["t_final"][2] == 9.0
 
 
 @pytest.mark.parametrize("scene,method,order", [
@@ -542,14 +552,14 @@ def test_write_read_round_trip(suffix, tmp_path, inprocess):
     path = tmp_path / f"sweep{suffix}"
     sweep.write(r, path)
     cols = sweep.read(path)
-    assert list(cols) == ["h", "eps", "t_final", *sweep.MEASURES, "status"]
+    assert list(cols) == ["h", "eps", "t_final", *sweep.MEASURES, "error_final_uncertainty", "status"]
     assert all(len(v) == p.size for v in cols.values())
     ends = [math.ceil(p.T / h - 1e-9) * h if ok == "ok" else math.nan for h, ok in zip(cols["h"], cols["status"])]
     assert np.array_equal(np.array(cols["t_final"], float), ends, equal_nan=True) and "ok" in cols["status"]
     idx = np.unravel_index(np.arange(p.size), p.shape)
     assert np.array_equal(cols["h"], np.array(p.axes[0].values)[idx[0]])
     assert np.array_equal(cols["eps"], np.array(p.axes[1].values)[idx[1]])
-    for k in p.measures:
+    for k in (*p.measures, "error_final_uncertainty"):
         assert np.array_equal(np.array(cols[k], dtype=float), r.values[k].ravel(), equal_nan=True), k
     assert cols["status"] == r.status.ravel().tolist()
     if suffix == ".parquet":
