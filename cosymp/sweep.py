@@ -419,9 +419,12 @@ class Result:
         return self.ends.ravel()
 
     def failures(self):
-        """(how many points failed, the first failure's message or None)."""
-        bad = [s for s in self.status.ravel() if s != "ok"]
-        return len(bad), (bad[0] if bad else None)
+        """(how many runs failed, the first one's message or None) and the same of the points whose run
+        ended but whose reference failed (error_final NaN, the run's other measures kept)."""
+        status, ended = self.status.ravel(), np.isfinite(self.ends.ravel())
+        runs = [s for s, e in zip(status, ended) if s != "ok" and not e]
+        references = [s for s, e in zip(status, ended) if s != "ok" and e]
+        return (len(runs), runs[0] if runs else None), (len(references), references[0] if references else None)
 
     @property
     def overhead_per_task_s(self):
@@ -595,7 +598,7 @@ def summary(result):
     """A few lines on what ran, how, and the range of each measure."""
     p = result.plan
     grid = " x ".join(f"{a.name} {len(a.values)}" for a in p.axes)
-    failed, first = result.failures()
+    (failed, first), (unmeasured, why) = result.failures()
     tasks = len(result.task_seconds)
     varied = {a.name for a in p.axes}
     fixed = ", ".join(f"{k} = {v:g}" for k, v in (("h", p.h), ("T", p.T)) if k not in varied)
@@ -626,4 +629,7 @@ def summary(result):
                      "column of the written rows")
     if failed:
         lines.append(f"  {failed} point{'s' if failed > 1 else ''} failed, e.g.: {first}")
+    if unmeasured:
+        lines.append(f"  {unmeasured} point{'s' if unmeasured > 1 else ''} without error_final, the run's other measures "
+                     f"kept: its reference failed, e.g.: {why}")
     return "\n".join(lines) + "\n"

@@ -195,6 +195,12 @@ def test_the_heat_map_taps_to_the_cell_under_the_click_and_marks_failures(tongue
     plot.set(failed)
     assert np.isnan(plot.source.data["z"]).sum() == 1, "a failed cell is drawn in the mapper's NaN colour (black)"
     assert plot.mapper.nan_color == "black"
+    # runs that completed but whose reference failed (beta = exp(t) beyond t = 8.87) were counted as failed runs
+    unmeasured = sweep.run(sweep.plan("charged", "midpoint", ["T=8:9:2", "x0=0.1:0.1:1"], ["error_final"],
+                                      values={"beta": "exp(t)"}))
+    said = maps.map_failures(unmeasured)
+    assert "runs failed" not in said and "1 of 2 runs have no error</b> (black cells; the runs completed)" in said
+    assert "the reference for the error at T" in said
 
 
 def test_a_map_of_nearly_one_colour_says_so_and_where_to_look(tongue):

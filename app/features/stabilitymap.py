@@ -424,12 +424,16 @@ def uniform_text(result):
 def map_failures(result):
     if result is None:
         return ""
-    failed, first = result.failures()
-    if not failed:
+    (failed, first), (unmeasured, why) = result.failures()
+    if not failed and not unmeasured:
         return (f"<p class='doc'>Every one of the {result.plan.size} runs completed ({html.escape(result.where)}, "
                 f"{result.wall_s:.1f} s).</p>")
-    return (f"<p class='doc'><b>{failed} of {result.plan.size} runs failed</b> (black cells), e.g.: "
-            f"{html.escape(first)}</p>")
+    return ("<p class='doc'>"
+            + (f"<b>{failed} of {result.plan.size} runs failed</b> (black cells), e.g.: {html.escape(first)} "
+               if failed else "")
+            + (f"<b>{unmeasured} of {result.plan.size} runs have no error</b> (black cells; the runs completed): "
+               f"their reference failed, e.g.: {html.escape(why)}" if unmeasured else "")
+            + "</p>")
 
 
 class StabilityMapView(FeatureView):
