@@ -42,7 +42,12 @@ def distance(a, b, axis=-1):
 def relative_error(z, z_ref):
     """(|z - z_ref| / |z_ref|, |z - z_ref|) over all entries, without overflow."""
     err = float(distance(np.ravel(z), np.ravel(z_ref)))
-    return err / max(float(norm(np.ravel(z_ref))), np.finfo(float).tiny), err
+    return err / reference_size(z_ref), err
+
+
+def reference_size(z_ref):
+    """|z_ref| over all entries, what relative errors divide by (the smallest float where it is 0)."""
+    return max(float(norm(np.ravel(z_ref))), np.finfo(float).tiny)
 
 
 ORBIT_ERROR = "|z − z_ref| / max |z_ref| up to t"  # errors_over_time's second, as plots label it

@@ -4,7 +4,7 @@ import math
 import numpy as np
 
 from . import warm
-from .diagnostics import distance, norm
+from .diagnostics import distance, norm, reference_size, relative_error
 from .errors import InputError, RunError
 from .integrate import MAX_STEPS, Setup, check_step, exact_flow, initial_states, simulate
 from .kernels.loops import energies, vector_field
@@ -113,6 +113,12 @@ def reference_final(setup, h, T, z0=None, skip=""):
         return a.z[-1], np.full(a.z.shape[1], np.inf)
     rounding = np.finfo(float).eps * math.sqrt(steps * k) * norm(a.z[-1])
     return a.z[-1], np.maximum(distance(a.z[-1], b.z[-1]), rounding)
+
+
+def relative_final(z, z_ref, spread):
+    """(|z - z_ref| / |z_ref|, spread / |z_ref|): the error at T and its reference's uncertainty,
+    relative as the run, sweeps, the app and reports give them."""
+    return relative_error(z, z_ref)[0], float(spread) / reference_size(z_ref)
 
 
 def scipy_reference(setup, T, z0=None, rtol=1e-13, atol=1e-13, t_eval=None, method="DOP853"):

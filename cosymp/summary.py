@@ -5,12 +5,12 @@ import time
 
 import numpy as np
 
-from .diagnostics import det_deviation, distance, nearby_states, norm, symplecticity_defect, tangent_maps
+from .diagnostics import det_deviation, nearby_states, symplecticity_defect, tangent_maps
 from .drive import CHUNK, Drive
 from .integrate import check_step, simulate
 from .kernels.loops import energies
 from .kernels.survey import ACC, ENV
-from .reference import check_reference, reference_final, refinement
+from .reference import check_reference, reference_final, refinement, relative_final
 
 
 def transport(traj, target):
@@ -111,11 +111,10 @@ def run_summary(setup, h, T, transport_from=None, with_error=True, progress=None
         out["Pi_final"] = Pi[0].tolist()
     if with_error:
         zr, spread = reference_final(setup, h, T, skip=SKIP_ERROR)
-        scale = max(float(norm(zr[0])), np.finfo(float).tiny)  # relative, as the app, reports and sweeps give it
-        out["error_final"] = float(distance(z, zr[0])) / scale
+        out["error_final"], uncertainty = relative_final(z, zr[0], spread[0])
         out["reference"] = "exact flow" if setup.scene.has_flow else f"rk8 at h/{refinement(setup, h)}"
         # None where it is infinite (the check at twice its step overflowed): JSON has no inf
-        out["reference_uncertainty"] = float(spread[0]) / scale if np.isfinite(spread[0]) else None
+        out["reference_uncertainty"] = uncertainty if math.isfinite(uncertainty) else None
     out["wall_total_s"] = time.perf_counter() - start
     return out
 

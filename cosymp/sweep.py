@@ -39,13 +39,12 @@ from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 import numpy as np
 
 from . import warm
-from .diagnostics import norm, relative_error
 from .drive import batch_runs, batchable
 from .errors import CosympError, InputError, as_number, quoted
 from .integrate import Setup, check_step, get_scene
 from .methods import THETA_APPLIES
 from .methods import method as get_method
-from .reference import check_reference, reference_final
+from .reference import check_reference, reference_final, relative_final
 from .workprecision import check_horizon, scan
 
 MEASURES = ("H_ext_max_abs", "det_max_dev", "error_final", "growth")
@@ -267,8 +266,7 @@ def figures(setup, h, T, measures):
         except CosympError as e:
             status = str(e)
         else:
-            out["error_final"] = relative_error(s.z, zr[0])[0]
-            out[UNCERTAINTY] = float(spread[0]) / max(float(norm(zr[0])), np.finfo(float).tiny)
+            out["error_final"], out[UNCERTAINTY] = relative_final(s.z, zr[0], spread[0])
     return {k: out[k] for k in _columns(measures)}, status, steps * h
 
 
