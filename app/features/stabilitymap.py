@@ -384,7 +384,7 @@ MAP_TEXT = ("<p>One measure of the sidebar's method over a grid of two varied qu
             "|det M<sub>k</sub> − 1| of the one-step maps; <b>relative error at T</b> the error at T relative to the "
             "exact flow or a fine RK8 run. Colours are on a log scale: growth's from 1/T, one e-fold of "
             "σ<sub>max</sub> over the run (at or below it, the lowest colour), the others' from their smallest "
-            "value. Black cells: the run failed (the line below the map says why). The same grid runs "
+            "value. Black cells: the run failed, or its error at T has no reference (the line below the map says why). The same grid runs "
             "from the command line, also on a Dask cluster: <code>{command}</code>. "
             "<b>Click a cell</b> to open that run in the Orbits view.</p>")
 
