@@ -97,6 +97,14 @@ class Entry:
     comparison: object
     failure: str
     final_error: float = None  # relative, against the exact flow or the fine rk8 reference; None if neither
+    # the reference run's own, relative as final_error (inf: unbounded); None against the exact flow
+    final_uncertainty: float = None
+
+    @property
+    def resolved(self):
+        """Whether the final error is above its reference's own uncertainty (a smaller one is not
+        resolved: it says how far the reference is off, not the method)."""
+        return self.final_error is not None and not self.final_error < (self.final_uncertainty or 0.0)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -139,16 +147,18 @@ def takes_reference(setup, h, T):
 
 
 def live_reference(setup, h, T):
-    """(states at every multiple of h, label) of the reference the scene's errors are measured
-    against (`takes_reference`), or None."""
+    """The Reference (`cosymp.reference.reference_states`) the scene's errors are measured against
+    (`takes_reference`), or None."""
     return reference_states(setup, h, T) if takes_reference(setup, h, T) else None
 
 
 def final_error(comparison, failure):
-    """The relative error at T, against the exact flow or the reference run; None without either."""
+    """(the relative error at T, against the exact flow or the reference run, and that run's own
+    uncertainty): (None, None) without either, the uncertainty None against the exact flow."""
     if comparison is None or failure or comparison.error is None:
-        return None
-    return float(comparison.error[-1])
+        return None, None
+    spread = comparison.uncertainty
+    return float(comparison.error[-1]), None if spread is None else float(spread[-1])
 
 
 def run_pair(scene, setups, h, T):
@@ -169,8 +179,8 @@ def run_pair(scene, setups, h, T):
         if any(e.label == label for e in entries):
             label += " (2)"
         if comparison is not None and reference is not None:
-            comparison = with_reference(comparison, reference[0], h, reference[1])
-        entries.append(Entry(label, s.method.name, comparison, failure, final_error(comparison, failure)))
+            comparison = with_reference(comparison, reference, h)
+        entries.append(Entry(label, s.method.name, comparison, failure, *final_error(comparison, failure)))
     return Runs(scene, h, T, tuple(entries), stopped)
 
 

@@ -59,7 +59,12 @@ def errors_over_time(z, z_ref):
     where z_ref passes near 0: the damped oscillator's q crosses 0 at an amplitude growing like
     e^(gamma t / 2) while its p is e^(-gamma t) smaller (the paper's values, midpoint rule: 4.9 at
     t = 40.2, where |z_ref| is 0.5 on an orbit of size 64; 0.039 relative to that size)."""
-    d, size = distance(z, z_ref), norm(z_ref)
+    return relative_over_time(distance(z, z_ref), z_ref)
+
+
+def relative_over_time(d, z_ref):
+    """Distances d from the records z_ref, relative as errors_over_time gives its two."""
+    size = norm(z_ref)
     tiny = np.finfo(float).tiny
     return d / np.maximum(size, tiny), d / np.maximum(np.fmax.accumulate(size), tiny)
 

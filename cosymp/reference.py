@@ -1,5 +1,6 @@
 """Reference solutions: the exact flow where a scene has one, else a fine fixed-step RK8 run."""
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -45,16 +46,41 @@ def fine_steps(setup, h, T):
     return check_step(h, T) * float(refinement(setup, h))
 
 
+class Reference(NamedTuple):
+    """A reference run at every multiple of h: states (steps + 1, 2n); label, which reference it
+    is; spread (steps + 1,), its own uncertainty at each of them (`uncertainty`)."""
+
+    states: np.ndarray
+    label: str
+    spread: np.ndarray
+
+
 def reference_states(setup, h, T, z0=None):
-    """(states, label) of a fine rk8 run of setup's scene and parameters from z0 (the scene's
-    initial condition by default), at every multiple of h up to the run's final time steps*h:
-    states (steps + 1, 2n), its step h/k no larger than 2% of the scene's time scale; label says
-    which reference it is. For the scenes without an exact flow; failures as for reference_final."""
+    """The Reference of a run of setup with step h to T: a fine rk8 run of its scene and parameters
+    from z0 (the scene's initial condition by default), at every multiple of h up to the run's final
+    time steps*h, its step h/k no larger than 2% of the scene's time scale, and its check at twice
+    that step (reference_final's uncertainty, at each of them; infinite from where the check
+    overflows). For the scenes without an exact flow; failures as for reference_final."""
     steps = check_step(h, T)
     check_reference(setup, h, T)
     k = refinement(setup, h)
-    run = _fine_run(Setup.make(setup.scene, "rk8", setup.values), h, k, steps * h, z0, k, "")
-    return run.z[:, 0], f"rk8 at h/{k}"
+    fine = Setup.make(setup.scene, "rk8", setup.values)
+    a = _fine_run(fine, h, k, steps * h, z0, k, "")
+    spread = np.full(steps + 1, np.inf)
+    try:
+        b = simulate(fine, 2 * h / k, steps * h, z0=z0, stride=k // 2)
+    except RunError as e:  # up to where it overflowed
+        b = e.partial
+    reached = len(b.t)
+    spread[:reached] = uncertainty(a.z[:reached, 0], b.z[:, 0], k * np.arange(reached))
+    return Reference(a.z[:, 0], f"rk8 at h/{k}", spread)
+
+
+def uncertainty(a, b, fine):
+    """The uncertainty of the reference states a (rows) after `fine` rk8 steps each: their
+    distance from their checks b, rk8 at twice their step, or the round-off of their steps,
+    eps sqrt(fine) |a|, where that is larger (see reference_final)."""
+    return np.maximum(distance(a, b), np.finfo(float).eps * np.sqrt(fine) * norm(a))
 
 
 OVERFLOWS = "leaves floating-point range (|z| > 1.8e308)"
@@ -111,8 +137,7 @@ def reference_final(setup, h, T, z0=None, skip=""):
         b = simulate(fine, 2 * h / k, t_final, z0=z0, stride=steps * k // 2)
     except RunError:  # the check left rk8's stability region: nothing bounds the reference's error
         return a.z[-1], np.full(a.z.shape[1], np.inf)
-    rounding = np.finfo(float).eps * math.sqrt(steps * k) * norm(a.z[-1])
-    return a.z[-1], np.maximum(distance(a.z[-1], b.z[-1]), rounding)
+    return a.z[-1], uncertainty(a.z[-1], b.z[-1], steps * k)
 
 
 def relative_final(z, z_ref, spread):

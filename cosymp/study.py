@@ -18,6 +18,7 @@ from .diagnostics import (
     loop_action,
     nearby_states,
     paper_symplectic_form,
+    relative_over_time,
     ring_states,
     separation_omega,
 )
@@ -41,6 +42,8 @@ class Comparison:
         or against a reference run given to `with_reference`; else None. against: which of them.
     orbit_error: |z - z_ref| relative to the largest |z_ref| so far, the orbit's size
         (diagnostics.errors_over_time): what the trajectory error plots show.
+    uncertainty, orbit_uncertainty: a reference run's own uncertainty, relative as error and
+        orbit_error are (an error below it is not resolved); None against the exact flow.
     Pi: mechanical momentum of the trajectory where the scene defines one, else None.
     """
 
@@ -58,6 +61,8 @@ class Comparison:
     cpu_s: float
     against: str = None
     orbit_error: np.ndarray = None
+    uncertainty: np.ndarray = None
+    orbit_uncertainty: np.ndarray = None
 
     @property
     def summary(self):
@@ -117,12 +122,17 @@ def compare(setup, h, T, delta=1e-4, cloud_points=0, cloud_radius=0.05, stride=N
                       time.thread_time() - start, "the exact flow" if error is not None else None, orbit_error)
 
 
-def with_reference(comparison, states, h, label):
-    """The comparison with its error measured against a reference run's states at every multiple
-    of h (`reference.reference_states`): for the scenes without an exact flow."""
+def with_reference(comparison, reference, h):
+    """The comparison with its error measured against a reference run (`reference.Reference`, its
+    states at every multiple of h), and that run's own uncertainty: for the scenes without an
+    exact flow."""
     run = comparison.run
-    error, orbit_error = errors_over_time(run.z[:, 0], states[np.rint(run.t / h).astype(np.int64)])
-    return dataclasses.replace(comparison, error=error, orbit_error=orbit_error, against=label)
+    at = np.rint(run.t / h).astype(np.int64)
+    states = reference.states[at]
+    error, orbit_error = errors_over_time(run.z[:, 0], states)
+    spread, orbit_spread = relative_over_time(reference.spread[at], states)
+    return dataclasses.replace(comparison, error=error, orbit_error=orbit_error, against=reference.label,
+                               uncertainty=spread, orbit_uncertainty=orbit_spread)
 
 
 def compare_until_failure(setup, h, T, **options):

@@ -745,6 +745,43 @@ def test_a_reference_that_overflows_leaves_the_comparison_shown_without_errors()
     assert s.message.level == "warning" and "no error is measured: the reference for the error at T" in s.message.text
 
 
+@pytest.mark.parametrize("T, own", [(8.2, r"1\.6e\+96"), (8.5, "unbounded")])
+def test_a_final_error_below_its_references_own_uncertainty_is_not_resolved(T, own):
+    """beta(t) = exp(t): by t = 8.2 the reference's step is too long for the gyration 2e^t, and its
+    check at twice its step overflows at 8.25. The table gave midpoint's error (4.11 at T = 8.2,
+    3.47 at 8.5; rk8 at h/16 puts them at 0.97 and 0.82) as measured, where `cosymp run` says it is
+    not resolved; so does the table now, and the verdict draws nothing from it."""
+    s = Study(scene="charged")
+    s.values = {"beta": "exp(t)"}
+    s.T = T
+    midpoint = s.results.entries[0]
+    assert not midpoint.failure and midpoint.final_error < midpoint.final_uncertainty and not midpoint.resolved
+    cell = common.numbers(s.results)[midpoint.label][3]
+    assert re.fullmatch(re.escape(f"{plotting.fmt(midpoint.final_error)} (not resolved: the reference's own "
+                                  "uncertainty is ") + own + r"\)", cell), cell
+    assert "trajectory error is the larger" not in common.verdict(s.results)
+
+
+def test_the_trajectory_error_plot_draws_the_references_own_uncertainty():
+    """A grey dotted line under the errors: the reference run's uncertainty, relative to the orbit's
+    size as they are (against the exact flow, none). Charged at its first view: 4.4e-14 of |z| at T,
+    both methods' errors above it and said as numbers alone."""
+    s = Study(scene="charged")
+    view = drawn(orbits.OrbitsView(s))
+    figs = shown_figures(view)
+    c = s.results.entries[0].comparison
+    x, y = plotting.peaks(c.run.t[1:], c.orbit_uncertainty[1:])
+    assert np.array_equal(figs.floor.data["x"], x) and np.array_equal(figs.floor.data["y"], y) and len(x) > 100
+    assert all(e.resolved and 0 < e.final_uncertainty < 1e-12 for e in s.results.entries)
+    assert [col[3] for col in list(common.numbers(s.results).values())[1:]] == [
+        plotting.fmt(e.final_error) for e in s.results.entries]
+    assert "grey dotted line is the reference's own uncertainty" in orbits.remark(s.results)
+    s.scene = "damped"
+    figs = shown_figures(view)
+    assert len(figs.floor.data["x"]) == 0 and all(e.final_uncertainty is None for e in s.results.entries)
+    assert "grey dotted" not in orbits.remark(s.results)
+
+
 def test_a_comparison_that_fails_as_a_whole_puts_its_inputs_back(monkeypatch):
     """The plots keep the last good comparison; the inputs follow them, unless they changed meanwhile."""
     s = Study(scene="damped")

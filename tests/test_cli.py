@@ -347,6 +347,25 @@ def test_a_report_refuses_the_options_it_would_ignore(argv, flags, tmp_path):
     assert not (tmp_path / "r.html").exists()
 
 
+def test_a_reports_error_below_its_references_own_uncertainty_is_not_resolved(tmp_path):
+    """beta(t) = exp(t) to T = 8.5: the reference's check overflows at t = 8.25. The report printed
+    midpoint's error, 3.47 (rk8 at h/16 puts it at 0.82), as measured; it says it is not resolved, as
+    `cosymp run` does, and its trajectory error plot draws the reference's own uncertainty."""
+    path = tmp_path / "r.html"
+    code, _, err = run_cli("report", "charged", "--set", "beta=exp(t)", "--T", "8.5", "-o", str(path))
+    text = path.read_text()
+    assert code == 0, err
+    assert re.search(r"<td>3\.47 \(not resolved: the reference&#x27;s own uncertainty is unbounded\)</td>", text)
+    spec = json.loads(re.search(r'id="figures" type="application/json">(.*?)</script>', text,
+                                re.DOTALL).group(1).replace("<\\/", "</"))
+    error = next(f for f in spec if f["title"].startswith("Trajectory error against rk8 at h/2"))
+    own = error["series"][2]
+    assert own["label"] == "the reference's own uncertainty" and own["dash"]
+    ys = [y for y in own["y"] if y is not None]
+    assert ys and all(0 < y < 1 for y in ys[:1000]), "finite before the check overflows, a gap after"
+    assert own["y"][-1] is None
+
+
 def test_a_report_whose_reference_fails_is_written_without_errors(tmp_path, recwarn):
     """beta(t) = exp(t) to T = 9: the reference overflows at t = 8.87. The report computed both runs and
     then exited 3 with no file, where the app shows the same comparison and says no error is measured;

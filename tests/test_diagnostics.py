@@ -15,7 +15,7 @@ from cosymp.diagnostics import (
     tangent_maps,
 )
 from cosymp.integrate import initial_states, simulate
-from cosymp.reference import reference_final, scipy_reference
+from cosymp.reference import reference_final, reference_states, scipy_reference
 from cosymp.scenes import SCENES
 
 
@@ -90,6 +90,38 @@ def test_rk8_reference_agrees_with_scipy_dop853(scene):
     sol = scipy_reference(s, T)
     assert np.allclose(z_ref[0], sol.y[:-1, -1], rtol=0, atol=1e-10)
     assert spread[0] < 1e-10
+
+
+def test_the_reference_runs_uncertainty_at_every_step_bounds_its_error_and_ends_as_the_runs():
+    """The app's and the report's reference (a state at every multiple of h) carries the uncertainty
+    `cosymp run` gives at T, at each of them: charged with beta(t) = exp(t) at h = 0.001 to T = 8.5.
+    Its check at twice its step overflows at t = 8.25: unbounded from there. Before it, the
+    uncertainty bounds the reference's true error (rk8 at h/16 against h/64: converged) at every
+    step beyond round-off, including where rk8's step is too long for the gyration 2e^t and Richardson's estimate
+    fell 100x short (t = 8); at T it is reference_final's own."""
+    s = setup("charged", "midpoint", beta="exp(t)")
+    h, T = 0.001, 8.5
+    ref = reference_states(s, h, T)
+    assert ref.label == "rk8 at h/2" and ref.states.shape == ref.spread.shape + (4,) == (8501, 4)
+    finite = np.isfinite(ref.spread)
+    reached = int(finite.sum())
+    assert finite[:reached].all() and 8.2 < (reached - 1) * h < 8.3, "finite up to the check's overflow, then inf"
+    fine = setup("charged", "rk8", beta="exp(t)")
+    truth, finer = (simulate(fine, h / k, T, stride=k).z[:, 0] for k in (16, 64))
+    assert np.all(np.linalg.norm(truth - finer, axis=1) <= 1e-5 * np.linalg.norm(truth, axis=1)), "converged"
+    off = np.linalg.norm(ref.states - truth, axis=1)[:reached]
+    size = np.linalg.norm(truth, axis=1)[:reached]
+    # Within round-off (to t = 4.2, 3.6e-13 of |z| at most) the "truth" has round-off of its own, 2.8x
+    # the reference's (8x its steps): there the two are compared within 10x.
+    truncation = off > 1e-10 * size
+    assert truncation[6000:].all() and np.all(off[truncation] <= ref.spread[:reached][truncation])
+    assert np.all(off[~truncation] <= 10 * ref.spread[:reached][~truncation])
+    assert off[8000] > 0.1 * size[8000]
+    assert ref.spread[8000] < 10 * off[8000], "a bound, not a blanket"
+    short = reference_states(s, h, 8.0)
+    z_ref, spread = reference_final(s, h, 8.0)
+    assert np.array_equal(short.states[-1], z_ref[0]) and short.spread[-1] == pytest.approx(spread[0], rel=1e-12)
+    assert short.spread[0] == 0.0
 
 
 @pytest.mark.parametrize("method", ["gauss4", "composition6", "rk4"])

@@ -173,12 +173,16 @@ def test_the_report_draws_the_first_method_over_the_second(tmp_path):
                 out, err) == 0, err.getvalue()
     spec = json.loads(re.search(r'id="figures" type="application/json">(.*?)</script>', path.read_text(),
                                 re.DOTALL).group(1).replace("<\\/", "</"))
-    assert all([s["alpha"] for s in f["series"]] == [0.7, 1.0] for f in spec)
+    own = "the reference's own uncertainty"  # the trajectory error's third series, beneath the two methods
+    assert all([s["alpha"] for s in f["series"][:2]] == [0.7, 1.0] for f in spec)
+    assert [[s["label"] for s in f["series"][2:]] for f in spec] == [[own] if f["title"].startswith("Trajectory error")
+                                                                     else [] for f in spec]
     requests, errors, drawn, answers = open_offline(path, "report-order.png", js=ORDER_JS)
     assert requests == [] and errors == [] and drawn == len(spec) == len(answers["js"])
-    for plot in answers["js"]:
-        assert plot["drawn"] == [["rk4", "dashed"], ["midpoint", "solid"]], "uPlot draws the last on top"
-        assert plot["legend"] == ["midpoint", "rk4"]
+    for f, plot in zip(spec, answers["js"]):
+        third = [[own, "dashed"]] if len(f["series"]) == 3 else []
+        assert plot["drawn"] == third + [["rk4", "dashed"], ["midpoint", "solid"]], "uPlot draws the last on top"
+        assert plot["legend"] == ["midpoint", "rk4"] + [s[0] for s in third]
 
 
 def test_the_quick_paper_report_has_every_section():

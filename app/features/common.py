@@ -198,7 +198,7 @@ def phase_note(kept, lost, bounded):
     the phase has gone round): it says so, and, when its energy error stays in a bounded band (its
     orbit keeps its size), that what it loses is phase: structure preservation bounds the energy
     error, not the phase along the orbit."""
-    if kept.final_error is None or lost.final_error is None:  # a run stopped early, or no reference
+    if not (kept.resolved and lost.resolved):  # a run stopped early, no reference, or one too coarse to tell
         return ""
     a, b = (float(np.nanmax(e.comparison.orbit_error)) for e in (kept, lost))
     if not a > b:
@@ -221,8 +221,18 @@ def numbers(runs):
     for e in runs.entries if runs is not None else ():
         summary = {**(e.comparison.summary if e.comparison is not None else {}),
                    "final relative error": e.final_error}
-        cols[e.label] = [fmt(summary.get(k)) for k in NUMBER_ROWS] + [e.failure or (ended(e.comparison.run, runs.T) if e.comparison is not None else "")]
+        cells = [fmt(summary.get(k)) for k in NUMBER_ROWS]
+        cells[NUMBER_ROWS.index("final relative error")] += unresolved(e)
+        cols[e.label] = cells + [e.failure or (ended(e.comparison.run, runs.T) if e.comparison is not None else "")]
     return cols
+
+
+def unresolved(entry):
+    """What the numbers table says after a final error below its reference's own uncertainty."""
+    if entry.final_error is None or entry.resolved:
+        return ""
+    own = "unbounded" if math.isinf(entry.final_uncertainty) else fmt(entry.final_uncertainty, 2)
+    return f" (not resolved: the reference's own uncertainty is {own})"
 
 
 def reached(run, T):

@@ -22,11 +22,13 @@ from ..plotting import (
     peaks,
     reset_ranges,
     scattered,
+    source,
     table,
 )
 from ..study import LIVE_REFERENCE_STEPS
 from .base import Feature, FeatureView
 from .common import (
+    EMPTY,
     PORTRAIT_MARKS,
     color_key,
     comparisons,
@@ -40,6 +42,7 @@ from .common import (
 )
 
 NUMBERS_TEXT = "<h4>Numbers</h4><p class='doc'>From the full-resolution runs: maxima over every step.</p>"
+FLOOR_COLOR = "#868e96"
 APART = 1e3  # two orbits whose sizes differ by more than this are drawn in portraits of their own
 
 
@@ -84,6 +87,9 @@ class Figures:
         # per bi"); the axes say what is drawn.
         self.energy = Pair(figure("energy error |H + p_t|", "t", "max |H + p_t| per bin", logy=True))
         self.error = Pair(figure("trajectory error", "t", ORBIT_ERROR, logy=True))
+        # the reference run's own uncertainty, relative as the errors are: below it they are not resolved
+        self.floor = source()
+        self.error.fig.line("x", "y", source=self.floor, line_color=FLOOR_COLOR, line_dash="dotted", line_width=2)
         figs = [f for _, f, _ in self.portraits] + [self.energy.fig, self.error.fig]
         self.grid = grid(*[pane(f) for f in figs], ncols=3 if len(figs) in (3, 6) else 2)
 
@@ -119,6 +125,10 @@ class Figures:
         self.error.colors(names(runs))
         self.error.set(over_time(runs, lambda c: (c.run.t[1:], c.orbit_error[1:]) if c.error is not None
                                  else (None, None), logy=True))  # 0 at t = 0
+        measured = [c for c in cs.values() if c.orbit_uncertainty is not None]
+        longest = max(measured, key=lambda c: len(c.run.t), default=None)  # they share the reference
+        x, y = peaks(longest.run.t[1:], longest.orbit_uncertainty[1:]) if longest else (EMPTY, EMPTY)
+        self.floor.data = {"x": x, "y": y}
 
     def reset(self):
         for _, fig, _ in self.portraits:
@@ -132,6 +142,10 @@ SPLIT = ("Two errors. <b>Energy</b>: |H + p_t|, 0 for the exact flow, which a st
          "method has run (its phase): there a higher order wins. It is divided by the orbit's size so far, the "
          "largest |z_ref| up to t (|z_ref| itself passes near 0 on an orbit stretched as the damped oscillator's); "
          "the table's final relative error divides by |z_ref| at T.")
+
+REFERENCE_OWN = (" The grey dotted line is the reference's own uncertainty, relative as the trajectory error is (its "
+                 "distance from rk8 at twice its step): an error below it is not resolved (the table says so of the "
+                 "final error).")
 
 
 def remark(runs):
@@ -147,7 +161,7 @@ def remark(runs):
                   "<code>cosymp run</code> measure the final error.")
     else:
         errors = SPLIT.format(against=f"against a reference run, {against}, as in the report (this scene has no "
-                                      "closed-form flow)")
+                                      "closed-form flow)") + REFERENCE_OWN
     return f"<p class='doc'>{PORTRAIT_MARKS} {errors}</p>"
 
 
