@@ -73,8 +73,8 @@ def note_rate(rates, key, run, steps):
 
 def comparison_bytes(setups, h, T):
     """Peak memory of comparing the setups (study.compare: 2n + 2 members with increments, and
-    their tangent maps), from the values the runs record, and of their reference run (one state
-    per step h) where one is computed."""
+    their tangent maps), from the values the runs record, and of their reference where one is
+    computed (`reference_bytes`)."""
     steps = check_step(h, T)
     total = 0
     for s in setups:
@@ -82,9 +82,17 @@ def comparison_bytes(setups, h, T):
         members = m + 2
         records = steps // default_stride(steps, members, m, increments=True) + 1
         total += records * members * (m + 1)
-    if setups and takes_reference(setups[0], h, T):
-        total += (steps + 1) * (2 * setups[0].scene.ndof + 1)
-    return BYTES_PER_RECORDED * total
+    return BYTES_PER_RECORDED * total + (reference_bytes(setups[0], h, T) if setups else 0)
+
+
+def reference_bytes(setup, h, T):
+    """Peak memory of the reference (`live_reference`; 0 where none is computed): a state (2n + 1
+    values) per step h. Its two rk8 runs, the reference and its check, each record t, z, p_t and H
+    at every step h; the distances between them are taken in blocks (92-126 bytes a step h on
+    kapitza and charged, tracemalloc; 40 per value leases 120 and 200)."""
+    if not takes_reference(setup, h, T):
+        return 0
+    return BYTES_PER_RECORDED * (check_step(h, T) + 1) * (2 * setup.scene.ndof + 1)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -99,12 +107,6 @@ class Entry:
     final_error: float = None  # relative, against the exact flow or the fine rk8 reference; None if neither
     # the reference run's own, relative as final_error (inf: unbounded); None against the exact flow
     final_uncertainty: float = None
-
-    @property
-    def resolved(self):
-        """Whether the final error is above its reference's own uncertainty (a smaller one is not
-        resolved: it says how far the reference is off, not the method)."""
-        return self.final_error is not None and not self.final_error < (self.final_uncertainty or 0.0)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -135,6 +135,27 @@ def with_reference(comparison, reference, h):
                                uncertainty=spread, orbit_uncertainty=orbit_spread)
 
 
+UNCERTAINTY_OVER = 10.0  # how far above the errors the reference's uncertainty is drawn (above it: a gap)
+
+
+def drawn_uncertainty(comparisons):
+    """(t, y): the reference run's own uncertainty as the trajectory error plots draw it, relative to
+    the orbit's size, from the first step (0 at t = 0), of the comparison that reached furthest (they
+    share the reference; a stopped run is rerun at a finer stride, so more records do not mean
+    further). Where it is above UNCERTAINTY_OVER times the largest finite error drawn it is a gap: it
+    rises to 1e96 where the reference's check overflows (charged, beta(t) = exp(t), T = 8.2), and the
+    plot's axis, following it, squeezed the errors into a few of its 110 decades. None without a
+    reference run."""
+    measured = [c for c in comparisons if c.orbit_uncertainty is not None]
+    if not measured:
+        return None
+    errors = np.concatenate([c.orbit_error for c in measured])
+    top = np.max(errors[np.isfinite(errors)], initial=0.0)
+    c = max(measured, key=lambda c: c.run.t[-1])
+    y = c.orbit_uncertainty[1:]
+    return c.run.t[1:], np.where(y <= UNCERTAINTY_OVER * top, y, np.nan)
+
+
 def compare_until_failure(setup, h, T, **options):
     """compare(), or, for a run that stops early, compare() up to the last completed step with
     the failure message. Returns (Comparison or None, message)."""

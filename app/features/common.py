@@ -6,6 +6,7 @@ import math
 import numpy as np
 
 from cosymp.methods import METHODS
+from cosymp.reference import unresolved
 from cosymp.report.style import pair_colors
 from cosymp.scenes import SCENES
 from cosymp.workprecision import ROUNDOFF, roundoff_bound
@@ -192,16 +193,24 @@ def growing_verdict(until, kept, lost, grown):
     return text + f"{phase_note(kept, lost, False)}</p>"
 
 
+def largest_error(c):
+    """(the comparison's largest trajectory error over its run, relative to the orbit's size, and
+    whether it is resolved: at least the reference's own uncertainty there)."""
+    i = int(np.nanargmax(c.orbit_error))
+    own = 0.0 if c.orbit_uncertainty is None else c.orbit_uncertainty[i]
+    return float(c.orbit_error[i]), bool(c.orbit_error[i] >= own)
+
+
 def phase_note(kept, lost, bounded):
     """A sentence when the symplectic method's trajectory error is the larger one over the run (a
     method of lower order; over the run, not at T: an error of phase comes back near 0 each time
     the phase has gone round): it says so, and, when its energy error stays in a bounded band (its
     orbit keeps its size), that what it loses is phase: structure preservation bounds the energy
     error, not the phase along the orbit."""
-    if not (kept.resolved and lost.resolved):  # a run stopped early, no reference, or one too coarse to tell
+    if kept.final_error is None or lost.final_error is None:  # a run stopped early, or no reference
         return ""
-    a, b = (float(np.nanmax(e.comparison.orbit_error)) for e in (kept, lost))
-    if not a > b:
+    (a, ok_a), (b, ok_b) = (largest_error(e.comparison) for e in (kept, lost))
+    if not (a > b and ok_a and ok_b):  # a maximum below the reference's own uncertainty tells nothing
         return ""
     orders = [order(e) for e in (kept, lost)]
     p = html.escape(kept.label)
@@ -222,17 +231,10 @@ def numbers(runs):
         summary = {**(e.comparison.summary if e.comparison is not None else {}),
                    "final relative error": e.final_error}
         cells = [fmt(summary.get(k)) for k in NUMBER_ROWS]
-        cells[NUMBER_ROWS.index("final relative error")] += unresolved(e)
+        cells[NUMBER_ROWS.index("final relative error")] += unresolved(e.final_error, e.final_uncertainty)
         cols[e.label] = cells + [e.failure or (ended(e.comparison.run, runs.T) if e.comparison is not None else "")]
     return cols
 
-
-def unresolved(entry):
-    """What the numbers table says after a final error below its reference's own uncertainty."""
-    if entry.final_error is None or entry.resolved:
-        return ""
-    own = "unbounded" if math.isinf(entry.final_uncertainty) else fmt(entry.final_uncertainty, 2)
-    return f" (not resolved: the reference's own uncertainty is {own})"
 
 
 def reached(run, T):

@@ -9,6 +9,7 @@ import panel as pn
 
 from cosymp.diagnostics import ORBIT_ERROR
 from cosymp.scenes import SCENES
+from cosymp.study import drawn_uncertainty
 
 from ..plotting import (
     SLOTS,
@@ -125,9 +126,8 @@ class Figures:
         self.error.colors(names(runs))
         self.error.set(over_time(runs, lambda c: (c.run.t[1:], c.orbit_error[1:]) if c.error is not None
                                  else (None, None), logy=True))  # 0 at t = 0
-        measured = [c for c in cs.values() if c.orbit_uncertainty is not None]
-        longest = max(measured, key=lambda c: len(c.run.t), default=None)  # they share the reference
-        x, y = peaks(longest.run.t[1:], longest.orbit_uncertainty[1:]) if longest else (EMPTY, EMPTY)
+        own = drawn_uncertainty(cs.values())
+        x, y = peaks(*own) if own else (EMPTY, EMPTY)
         self.floor.data = {"x": x, "y": y}
 
     def reset(self):
@@ -144,8 +144,8 @@ SPLIT = ("Two errors. <b>Energy</b>: |H + p_t|, 0 for the exact flow, which a st
          "the table's final relative error divides by |z_ref| at T.")
 
 REFERENCE_OWN = (" The grey dotted line is the reference's own uncertainty, relative as the trajectory error is (its "
-                 "distance from rk8 at twice its step): an error below it is not resolved (the table says so of the "
-                 "final error).")
+                 "distance from rk8 at twice its step, or its round-off where larger; not drawn where it is far above "
+                 "the errors): an error below it is not resolved (the table says so of the final error).")
 
 
 def remark(runs):
@@ -155,6 +155,8 @@ def remark(runs):
     against = next((e.comparison.against for e in runs.ok if e.comparison.against), None)
     if SCENES[runs.scene].has_flow:
         errors = SPLIT.format(against="against the exact flow")
+    elif runs.reference_failure:
+        errors = "No closed-form flow for this scene, and its reference run failed: no trajectory error (see the message)."
     elif against is None:
         errors = (f"No closed-form flow for this scene, and its reference would take more than "
                   f"{LIVE_REFERENCE_STEPS:.0e} rk8 steps here: no trajectory error plot; the report or "

@@ -5,13 +5,14 @@ import numpy as np
 
 from ..diagnostics import ORBIT_ERROR
 from ..errors import RunError
-from ..reference import reference_states
-from ..study import compare_until_failure, with_reference
+from ..reference import reference_states, unresolved
+from ..study import compare_until_failure, drawn_uncertainty, with_reference
 from . import Figure, Report, Section, Series, Table
 from .style import pair_colors
 
 DELTA = 1e-4
 CLOUD_POINTS = 32
+UNCERTAINTY_COLOR = "#868e96"
 
 
 def command(setups, h, T, out="report.html"):
@@ -99,16 +100,14 @@ def _numbers(s, c, failure, err):
         return [s.method.label(s.theta), np.nan, np.nan, np.nan, np.nan, 0, np.nan, failure]
     n = c.summary
     final = n["final relative error"] if n["final relative error"] is not None else (np.nan if err is None else err)
-    own = np.nan if c.uncertainty is None or failure else float(c.uncertainty[-1])
-    if final < own:  # the reference is further off than the method: the error says nothing of the method
-        final = f"{final:.3g} (not resolved: the reference's own uncertainty is " + (
-            "unbounded)" if np.isinf(own) else f"{own:.2g})")
+    own = unresolved(final, None if c.uncertainty is None or failure else float(c.uncertainty[-1]))
+    if own:  # the reference is further off than the method: the error says nothing of the method
+        final = f"{final:.3g}{own}"
     return [s.method.label(s.theta), n["max |H + p_t|"], n["max |det M_k − 1|"], n["max |M_kᵀ J M_k − J|"], final, n["steps"],
             c.run.wall_s, failure or "no"]
 
 
 A_ALPHA = 0.7
-UNCERTAINTY_COLOR = "#868e96"
 """The first method is drawn over the second and slightly transparent, so that the second shows
 where they cross (the app's A_ALPHA)."""
 
@@ -133,13 +132,14 @@ def _orbit_figures(scene, runs):
     figs.append(Figure("Extended Hamiltonian H + p_t", "t", "H + p_t", _series(runs, lambda c: (c.run.t, c.run.H_ext[:, 0]))))
     if all(c.error is not None for _, c in runs):
         # with the reference run's own uncertainty, relative as the errors are (0 at t = 0: drawn from the first step)
-        own = max((c for _, c in runs if c.orbit_uncertainty is not None), key=lambda c: len(c.run.t), default=None)
+        own = drawn_uncertainty([c for _, c in runs])
         figs.append(Figure(f"Trajectory error against {runs[0][1].against}, relative to the orbit's size", "t",
                            ORBIT_ERROR, _series(runs, lambda c: (c.run.t, c.orbit_error))
-                           + ([Series("the reference's own uncertainty", own.run.t[1:], own.orbit_uncertainty[1:],
-                                      dash=True, color=UNCERTAINTY_COLOR)] if own else []), logy=True,
+                           + ([Series("the reference's own uncertainty", *own, dash=True, color=UNCERTAINTY_COLOR)]
+                              if own else []), logy=True,
                            caption="" if own is None else "Below the grey line, the reference's own uncertainty (its "
-                           "distance from rk8 at twice its step), an error is not resolved."))
+                           "distance from rk8 at twice its step, or its round-off where larger; not drawn where it is "
+                           "far above the errors), an error is not resolved."))
     return figs
 
 
