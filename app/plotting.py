@@ -471,8 +471,8 @@ def rule():
     return note("<hr class='rule'>")
 
 
-def swatch(color, label, dashed=False):
-    style = f"border-top: 3px {'dashed' if dashed else 'solid'} {color}"
+def swatch(color, label, dashed=False, dotted=False):
+    style = f"border-top: 3px {'dashed' if dashed else 'dotted' if dotted else 'solid'} {color}"
     return f"<span class='swatch' style='{style}'></span>{html.escape(label)}"
 
 

@@ -120,6 +120,7 @@ def parser():
 
 def _run(args, out):
     from .integrate import Setup, get_scene
+    from .reference import is_resolved
     from .scenes import SCENES
     from .summary import run_summary
 
@@ -159,7 +160,8 @@ def _run(args, out):
             own = " (the reference's own: unbounded, its check at twice its step overflowed: the run's error is not resolved)"
         elif unc > 0:
             own = (f" (the reference's own, estimated: {unc:.1e}"
-                   + ("; larger: the run's error is not resolved)" if res["error_final"] < unc else ")"))
+                   + ("; at least as large: the run's error is not resolved)"
+                      if not is_resolved(res["error_final"], unc) else ")"))
         lines.append(f"  relative error at T vs {res['reference']} = {res['error_final']:.3e}{own}")
     lines.append(f"  integration time {res['wall_s']:.3f} s (total {res['wall_total_s']:.3f} s)")
     out.write("\n".join(lines) + "\n")

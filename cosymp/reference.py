@@ -144,12 +144,21 @@ def reference_final(setup, h, T, z0=None, skip=""):
     return a.z[-1], uncertainty(a.z[-1], b.z[-1], steps * k)
 
 
+def is_resolved(error, spread):
+    """Whether a relative error at T is resolved: above its reference's own relative uncertainty
+    (spread; None or 0: the exact flow's). Not at equality: rk8 at h measured against rk8 at h/2,
+    its reference, is that reference's check, and its error the uncertainty itself."""
+    return not spread or not error <= spread
+
+
 def unresolved(error, spread):
-    """What a table says after a relative error at T below its reference's own relative uncertainty
-    (spread; inf: unbounded, None: none, the exact flow's), in `cosymp run`'s words; else ''."""
-    if error is None or spread is None or not error < spread:
+    """What a table says after a relative error at T that is not resolved (`is_resolved`; spread
+    inf: unbounded), in `cosymp run`'s words; else ''."""
+    if error is None or is_resolved(error, spread):
         return ""
-    own = "unbounded, its check at twice its step overflowed" if math.isinf(spread) else f"{spread:.1e}"
+    own = ("unbounded, its check at twice its step overflowed" if math.isinf(spread) else
+           f"{spread:.1e}, more than |z_ref| itself: the reference has lost the solution" if spread >= 1 else
+           f"{spread:.1e}")
     return f" (not resolved: the reference's own uncertainty is {own})"
 
 

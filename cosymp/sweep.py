@@ -613,9 +613,10 @@ def summary(result):
         at = ", ".join(f"{a.name} = {a.values[i]:.4g}" for a, i in zip(p.axes, hi))
         lines.append(f"  {k}: min {np.nanmin(v):.4g}, max {np.nanmax(v):.4g} (at {at})")
     if "error_final" in p.measures:
-        unresolved = int(np.sum(result.values["error_final"] < result.values[UNCERTAINTY]))
+        error, own = result.values["error_final"], result.values[UNCERTAINTY]
+        unresolved = int(np.sum((error <= own) & (own > 0)))  # as reference.is_resolved
         if unresolved:
-            lines.append(f"  {unresolved} point{'s' if unresolved > 1 else ''} with error_final below its reference's "
+            lines.append(f"  {unresolved} point{'s' if unresolved > 1 else ''} with error_final at most its reference's "
                          f"own uncertainty: not resolved (the column {UNCERTAINTY})")
     cols = {name: c.tolist() for name, c in p.columns(np.arange(p.size)).items()}
     T = np.asarray(cols.get("T", [p.T] * p.size), float)

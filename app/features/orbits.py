@@ -1,6 +1,7 @@
 """Orbits: phase portraits of both methods, their error split in two (the energy error |H~| =
 |H + p_t| over the run, and the trajectory's relative error against the exact flow or a reference
 run), and the numbers over every step. It shows the sidebar's comparison."""
+import html
 from functools import partial
 
 import numpy as np
@@ -24,6 +25,7 @@ from ..plotting import (
     reset_ranges,
     scattered,
     source,
+    swatch,
     table,
 )
 from ..study import LIVE_REFERENCE_STEPS
@@ -143,6 +145,7 @@ SPLIT = ("Two errors. <b>Energy</b>: |H + p_t|, 0 for the exact flow, which a st
          "largest |z_ref| up to t (|z_ref| itself passes near 0 on an orbit stretched as the damped oscillator's); "
          "the table's final relative error divides by |z_ref| at T.")
 
+OWN_KEY = swatch(FLOOR_COLOR, "the reference's own uncertainty (trajectory error)", dotted=True)
 REFERENCE_OWN = (" The grey dotted line is the reference's own uncertainty, relative as the trajectory error is (its "
                  "distance from rk8 at twice its step, or its round-off where larger; not drawn where it is far above "
                  "the errors): an error below it is not resolved (the table says so of the final error).")
@@ -155,8 +158,9 @@ def remark(runs):
     against = next((e.comparison.against for e in runs.ok if e.comparison.against), None)
     if SCENES[runs.scene].has_flow:
         errors = SPLIT.format(against="against the exact flow")
-    elif runs.reference_failure:
-        errors = "No closed-form flow for this scene, and its reference run failed: no trajectory error (see the message)."
+    elif runs.reference_failure:  # said here too: the message's notice goes after a few seconds
+        errors = (f"No closed-form flow for this scene, and no trajectory error: "
+                  f"{html.escape(runs.reference_failure)}.")
     elif against is None:
         errors = (f"No closed-form flow for this scene, and its reference would take more than "
                   f"{LIVE_REFERENCE_STEPS:.0e} rk8 steps here: no trajectory error plot; the report or "
@@ -209,7 +213,8 @@ class OrbitsView(FeatureView):
         self._shown = which
         self.remark.object = remark(runs)
         figs.update(runs)
-        self.key.object = color_key(runs) + verdict(runs)
+        self.key.object = color_key(runs, OWN_KEY if any(e.comparison.orbit_uncertainty is not None
+                                                         for e in runs.ok) else "") + verdict(runs)
         self.table.object = pd.DataFrame(numbers(runs))
 
 
