@@ -9,7 +9,7 @@ from the scene's initial state with step h to horizon T, and gives the requested
 - error_final: ||z(T) - z_ref(T)|| / ||z_ref(T)|| over z = (q, p); z_ref the exact flow, else
   rk8 at a step of at most 2% of the scene's time scale (reference.reference_final), whose own
   uncertainty, relative as the error is, comes beside it (error_final_uncertainty: where it is
-  the larger, the error is not resolved).
+  at least as large, the error is not resolved).
 - growth: ln(sigma_max(M_(N-1) ... M_0)) / T, the largest finite-time growth exponent of the
   method's own map along the run (diagnostics.MapGrowth): 0 for a bounded linear map, the
   Floquet exponent inside a Mathieu tongue, ln|R(ih)|/h for a one-step method with stability
