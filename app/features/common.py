@@ -68,44 +68,21 @@ def verdict(runs):
     for e in shown:
         kind = preserves(e)
         (kept if kind == "symplectic" else lost if kind == "none" else {})[e.label] = e
+    if len(kept) == 2:
+        return both_symplectic(runs, shown)
     if len(kept) != 1 or len(lost) != 1:
         return ""
     (p, ke), (n, le) = next(iter(kept.items())), next(iter(lost.items()))
     kr, lr = ke.comparison.run, le.comparison.run
-    kept_err = np.abs(kr.H_ext[:, 0])
-    band = float(np.nanmax(kept_err))
-    # The tenths from the first step: H + p_t is 0 by construction at t = 0, and a run of fewer than
-    # 20 records had that 0 as its whole first tenth (a band "5.1e+304× wider" at its end).
-    first, last = tenths(kept_err)
-    growth = last / max(first, np.finfo(float).tiny)
-    stopped = sorted((e.comparison.run.t[-1], e.label) for e in (ke, le) if e.failure)
-    earliest = [label for t, label in stopped if t == stopped[0][0]] if stopped else []
-    until = ((f"Up to T = {runs.T:g}" if reached(lr, runs.T) else f"Up to t = {lr.t[-1]:.6g}") if not stopped else
-             f"Up to t = {stopped[0][0]:.6g}, where {html.escape(' and '.join(earliest))} stopped ("
-             + "".join(f"{html.escape(label)} stopped at t = {t:.6g}; " for t, label in stopped[len(earliest):])
-             + f"see the message{'s' if len(stopped) > 1 else ''})")
-    rounding = within_roundoff(kr)
-    biased = not rounding and growth > BAND_GROWTH and band <= BIASED * np.finfo(float).eps * max_energy(kr) * kr.steps
-    rounding = rounding or biased
-    bounded = growth <= BAND_GROWTH or rounding
-    if not bounded:
-        h_first, h_last = tenths(np.abs(kr.H[:, 0]))
-        if h_last > BAND_GROWTH * h_first:
-            return growing_verdict(until, ke, le, h_last / h_first)
-    energy = max_energy(kr)
-    if band >= RESOLVED * energy:
-        return (f"<p class='verdict'>{until}, {html.escape(p)}'s |H + p_t| reaches {band:.2g}, {band / energy:.2g}× the "
-                f"largest |H| of its run ({energy:.2g}): at this h it does not follow the solution's energy, and a band "
-                "that wide bounds nothing; reduce h before comparing the methods.</p>")
-    what = (f"{html.escape(p)}'s band ({band:.2g}, its steps' rounding: within {BIASED:g} ε |H| N of its {kr.steps} "
-            f"steps, {growth:.2g}× wider in the run's last tenth than in its first, as a rounding bias of each step "
-            "adds up)" if biased else
-            f"{html.escape(p)}'s band ({band:.2g}, round-off: within {ROUNDOFF:g} ε |H| √N of its {kr.steps} "
-            "steps)" if rounding else
-            f"{html.escape(p)}'s bounded band ({band:.2g})" if bounded else
-            f"{html.escape(p)}'s band ({band:.2g}, itself {growth:.2g}× wider in the run's last tenth than in its first)")
+    until = until_text(runs, (le, ke))
+    b = Band(ke)
+    if b.grown:
+        return growing_verdict(until, ke, le, b.grown)
+    if b.lost:
+        return b.lost_text(until)
+    what = b.text()
     drift = np.abs(lr.H_ext[:, 0])
-    above = np.flatnonzero(drift > band)
+    above = np.flatnonzero(drift > b.size)
     if not above.size:
         orders = [order(e) for e in (le, ke)]
         smaller = (f"the error of {html.escape(n)}'s higher order ({orders[0]} against {orders[1]}) is the smaller"
@@ -115,14 +92,113 @@ def verdict(runs):
         return (f"<p class='verdict'>{until}, {html.escape(n)}'s |H + p_t| (at most {np.nanmax(drift):.2g}) "
                 f"stays below {what}: at this h and T {smaller}. "
                 "Nothing bounds it over longer runs; whether it leaves the band there depends on the scene (the "
-                f"Long run tab measures it).{phase_note(ke, le, bounded)}</p>")
+                f"Long run tab measures it).{phase_note(ke, le, b.bounded)}</p>")
     end = float(np.nanmax(drift[-max(len(drift) // 10, 1):]))  # not its last value: |H + p_t| oscillates
     return (f"<p class='verdict'>{html.escape(n)}'s |H + p_t| leaves {what} at t ≈ {lr.t[above[0]]:.3g} and ends "
-            f"{end / band:.3g}× above it (its maximum over the run's last tenth, to t = {lr.t[-1]:g}): "
-            + (f"{html.escape(n)}'s is the method's error, {html.escape(p)}'s its steps' rounding." if rounding else f"{html.escape(n)} drifts, {html.escape(p)} does not." if bounded else
+            f"{end / b.size:.3g}× above it (its maximum over the run's last tenth, to t = {lr.t[-1]:g}): "
+            + (f"{html.escape(n)}'s is the method's error, {html.escape(p)}'s its steps' rounding." if b.rounding else f"{html.escape(n)} drifts, {html.escape(p)} does not." if b.bounded else
                f"{html.escape(n)} drifts faster than {html.escape(p)}.")
             + (f" {html.escape(p)}'s run stopped at t = {kr.t[-1]:.6g} (see the message): its band is measured up to "
-               "there." if ke.failure else "") + f"{phase_note(ke, le, bounded)}</p>")
+               "there." if ke.failure else "") + f"{phase_note(ke, le, b.bounded)}</p>")
+
+
+def until_text(runs, entries):
+    """How far the verdict's data go: to T (or the last whole step past it), or to where the run that
+    stopped first stopped (the others' stops said too). Runs that did not stop end where the first
+    entry's does."""
+    stopped = sorted((e.comparison.run.t[-1], e.label) for e in entries if e.failure)
+    if not stopped:
+        run = entries[0].comparison.run
+        return f"Up to T = {runs.T:g}" if reached(run, runs.T) else f"Up to t = {run.t[-1]:.6g}"
+    earliest = [label for t, label in stopped if t == stopped[0][0]]
+    return (f"Up to t = {stopped[0][0]:.6g}, where {html.escape(' and '.join(earliest))} stopped ("
+            + "".join(f"{html.escape(label)} stopped at t = {t:.6g}; " for t, label in stopped[len(earliest):])
+            + f"see the message{'s' if len(stopped) > 1 else ''})")
+
+
+class Band:
+    """A structure-preserving run's |H + p_t| as the verdict reads it: its largest value (size); how
+    much wider it is over the run's last tenth than over its first (growth; the tenths from the first
+    step: H + p_t is 0 by construction at t = 0, and a run of fewer than 20 records had that 0 as its
+    whole first tenth, a band "5.1e+304× wider" at its end); whether it is the rounding of its steps
+    (within round-off, or growing but within BIASED eps |H| N: biased); bounded (growth at most
+    BAND_GROWTH, or rounding); grown: how much |H| itself grew where the band is not bounded (0 where
+    it did not: then the exact solution grows, `growing_verdict`); lost: whether it reaches RESOLVED
+    times the largest |H| (a band that wide bounds nothing)."""
+
+    def __init__(self, entry):
+        self.entry = entry
+        run = self.run = entry.comparison.run
+        err = np.abs(run.H_ext[:, 0])
+        self.size = float(np.nanmax(err))
+        first, last = tenths(err)
+        self.growth = last / max(first, np.finfo(float).tiny)
+        self.energy = max_energy(run)
+        rounding = within_roundoff(run)
+        self.biased = (not rounding and self.growth > BAND_GROWTH
+                       and self.size <= BIASED * np.finfo(float).eps * self.energy * run.steps)
+        self.rounding = rounding or self.biased
+        self.bounded = self.growth <= BAND_GROWTH or self.rounding
+        self.grown = 0.0
+        if not self.bounded:
+            h_first, h_last = tenths(np.abs(run.H[:, 0]))
+            self.grown = h_last / h_first if h_last > BAND_GROWTH * h_first else 0.0
+        self.lost = self.size >= RESOLVED * self.energy
+
+    def lost_text(self, until):
+        p = html.escape(self.entry.label)
+        return (f"<p class='verdict'>{until}, {p}'s |H + p_t| reaches {self.size:.2g}, {self.size / self.energy:.2g}× "
+                f"the largest |H| of its run ({self.energy:.2g}): at this h it does not follow the solution's energy, "
+                "and a band that wide bounds nothing; reduce h before comparing the methods.</p>")
+
+    def text(self):
+        """'{method}'s band (size, what it is)'."""
+        p, size, steps = html.escape(self.entry.label), self.size, self.run.steps
+        if self.biased:
+            return (f"{p}'s band ({size:.2g}, its steps' rounding: within {BIASED:g} ε |H| N of its {steps} steps, "
+                    f"{self.growth:.2g}× wider in the run's last tenth than in its first, as a rounding bias of each "
+                    "step adds up)")
+        if self.rounding:
+            return f"{p}'s band ({size:.2g}, round-off: within {ROUNDOFF:g} ε |H| √N of its {steps} steps)"
+        if self.bounded:
+            return f"{p}'s bounded band ({size:.2g})"
+        return f"{p}'s band ({size:.2g}, itself {self.growth:.2g}× wider in the run's last tenth than in its first)"
+
+
+def both_symplectic(runs, entries):
+    """The verdict where both methods are symplectic (and not both within round-off): each keeps
+    |H + p_t| in a band, whose width is what their order and h decide: which is the narrower and by how
+    much, or that the narrower is only its steps' rounding. As the one-symplectic verdict where either
+    band is lost or the solution's |H| grows."""
+    until = until_text(runs, entries)
+    bands = [Band(e) for e in entries]
+    grown = max(b.grown for b in bands)
+    if grown:
+        return growing_verdict(until, *entries, grown)
+    lost = [b for b in bands if b.lost]
+    if lost:
+        return lost[0].lost_text(until)
+    narrow, wide = sorted(bands, key=lambda b: b.size)
+    n, w = html.escape(narrow.entry.label), html.escape(wide.entry.label)
+    orders = order(narrow.entry), order(wide.entry)
+    text = (f"<p class='verdict'>{until}, both methods are symplectic"
+            + (", and each keeps |H + p_t| in a band: " if all(b.bounded for b in bands) else "; their |H + p_t|: ")
+            + f"{narrow.text()} and {wide.text()}. ")
+    if narrow.rounding:
+        text += (f"{n}'s own error does not show at this h; {w}'s band is its error, the wider for its "
+                 + (f"lower order ({orders[1]} against {orders[0]})." if orders[1] < orders[0] else
+                    f"step's error at the same order ({orders[0]})." if orders[0] == orders[1] else
+                    f"error constant, though its order is higher ({orders[1]} against {orders[0]})."))
+    else:
+        ratio = wide.size / max(narrow.size, np.finfo(float).tiny)
+        text += (f"{n}'s is {ratio:.2g}× narrower: "
+                 + (f"its higher order ({orders[0]} against {orders[1]})." if orders[0] > orders[1] else
+                    f"the same order ({orders[0]}), a smaller error constant." if orders[0] == orders[1] else
+                    f"though its order is lower ({orders[0]} against {orders[1]}), at this h its error constant "
+                    "is the smaller."))
+    if not all(b.bounded for b in bands):
+        text += " A band that widens over the run bounds nothing beyond it (the Long run tab measures it)."
+    return text + "</p>"
 
 
 def both_roundoff(runs, entries):
