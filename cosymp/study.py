@@ -139,21 +139,26 @@ UNCERTAINTY_OVER = 10.0  # how far above the errors the reference's uncertainty 
 
 
 def drawn_uncertainty(comparisons):
-    """(t, y): the reference run's own uncertainty as the trajectory error plots draw it, relative to
-    the orbit's size, from the first step (0 at t = 0), of the comparison that reached furthest (they
-    share the reference; a stopped run is rerun at a finer stride, so more records do not mean
-    further). Where it is above UNCERTAINTY_OVER times the largest finite error drawn it is a gap: it
-    rises to 1e96 where the reference's check overflows (charged, beta(t) = exp(t), T = 8.2), and the
-    plot's axis, following it, squeezed the errors into a few of its 110 decades. None without a
-    reference run."""
+    """(t, y, side): the reference run's own uncertainty as the trajectory error plots draw it,
+    relative to the orbit's size, from the first step (0 at t = 0), of the comparison that reached
+    furthest (they share the reference; a stopped run is rerun at a finer stride, so more records do
+    not mean further). Drawn only within the errors' own range, from the smallest positive error
+    drawn to UNCERTAINTY_OVER times the largest, a gap elsewhere: a plot's axis follows every curve,
+    and the uncertainty rose to 1e96 where the reference's check overflows (charged, beta(t) = exp(t),
+    T = 8.2: 110 decades, the errors squeezed into a few), and lay eight decades below both errors in
+    the app's first view (they took the plot's top third). side: "below" or "above" where all of it
+    is (every error resolved by far, or none), else "". None without a reference run."""
     measured = [c for c in comparisons if c.orbit_uncertainty is not None]
-    if not measured:
+    errors = np.concatenate([c.orbit_error[1:] for c in measured] or [np.empty(0)])
+    errors = errors[np.isfinite(errors) & (errors > 0)]
+    if not measured or not errors.size:
         return None
-    errors = np.concatenate([c.orbit_error for c in measured])
-    top = np.max(errors[np.isfinite(errors)], initial=0.0)
     c = max(measured, key=lambda c: c.run.t[-1])
     y = c.orbit_uncertainty[1:]
-    return c.run.t[1:], np.where(y <= UNCERTAINTY_OVER * top, y, np.nan)
+    low, high = errors.min(), UNCERTAINTY_OVER * errors.max()
+    inside = (y >= low) & (y <= high)
+    side = "" if inside.any() else "below" if np.all(y < low) else "above" if np.all(y > high) else ""
+    return c.run.t[1:], np.where(inside, y, np.nan), side
 
 
 def compare_until_failure(setup, h, T, **options):

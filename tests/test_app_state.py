@@ -27,6 +27,7 @@ from cosymp.integrate import check_step
 from cosymp.methods import METHODS
 from cosymp.reference import reference_final
 from cosymp.scenes import SCENES, first, lead
+from cosymp.study import drawn_uncertainty
 
 APP = pathlib.Path(__file__).resolve().parent.parent / "app"
 
@@ -801,9 +802,14 @@ def test_the_trajectory_error_plot_draws_the_references_own_uncertainty():
     view = drawn(orbits.OrbitsView(s))
     figs = shown_figures(view)
     c = s.results.entries[0].comparison
-    x, y = plotting.peaks(c.run.t[1:], c.orbit_uncertainty[1:])
-    assert np.array_equal(figs.floor.data["x"], x) and np.array_equal(figs.floor.data["y"], y) and len(x) > 100
-    assert np.all((0 < y) & (y < 1e-12)), "all of it drawn, below the errors"
+    t, own, side = drawn_uncertainty(common.comparisons(s.results).values())
+    assert side == "" and np.array_equal(t, c.run.t[1:]) and np.isfinite(own).sum() > 1000
+    x, y = plotting.peaks(t, own)
+    assert np.array_equal(figs.floor.data["x"], x) and np.array_equal(figs.floor.data["y"], y, equal_nan=True)
+    kept = np.isfinite(own)
+    assert np.array_equal(own[kept], c.orbit_uncertainty[1:][kept]) and np.all(own[kept] < 1e-12)
+    errors = np.concatenate([e.comparison.orbit_error[1:] for e in s.results.entries])
+    assert np.all(c.orbit_uncertainty[1:][~kept] < errors[errors > 0].min()), "left out only below every error"
     assert all(0 < e.final_uncertainty < 1e-12 and e.final_error > e.final_uncertainty for e in s.results.entries)
     assert [col[3] for col in list(common.numbers(s.results).values())[1:]] == [
         plotting.fmt(e.final_error) for e in s.results.entries]
@@ -813,6 +819,13 @@ def test_the_trajectory_error_plot_draws_the_references_own_uncertainty():
     figs = shown_figures(view)
     assert len(figs.floor.data["x"]) == 0 and all(e.final_uncertainty is None for e in s.results.entries)
     assert "grey dotted" not in orbits.remark(s.results) and orbits.OWN_KEY not in view.key.object
+    s.scene = "modulated"  # its first view: both errors eight decades above it, which drew them in the top third
+    figs = shown_figures(view)
+    largest = max(float(e.comparison.orbit_uncertainty.max()) for e in s.results.entries)
+    assert largest < min(float(e.comparison.orbit_error[1:].min()) for e in s.results.entries)
+    assert len(figs.floor.data["x"]) == 0 and orbits.OWN_KEY not in view.key.object
+    assert (f"Below every error drawn: {orbits.OWN}, at most {largest:.1g} of the orbit's size; both errors are "
+            "resolved.") in orbits.remark(s.results)
 
 
 def test_rk8_against_its_own_check_and_errors_of_rounding_are_not_read_as_order():

@@ -129,7 +129,7 @@ class Figures:
         self.error.set(over_time(runs, lambda c: (c.run.t[1:], c.orbit_error[1:]) if c.error is not None
                                  else (None, None), logy=True))  # 0 at t = 0
         own = drawn_uncertainty(cs.values())
-        x, y = peaks(*own) if own else (EMPTY, EMPTY)
+        x, y = peaks(*own[:2]) if own and not own[2] else (EMPTY, EMPTY)
         self.floor.data = {"x": x, "y": y}
 
     def reset(self):
@@ -146,9 +146,25 @@ SPLIT = ("Two errors. <b>Energy</b>: |H + p_t|, 0 for the exact flow, which a st
          "the table's final relative error divides by |z_ref| at T.")
 
 OWN_KEY = swatch(FLOOR_COLOR, "the reference's own uncertainty (trajectory error)", dotted=True)
-REFERENCE_OWN = (" The grey dotted line is the reference's own uncertainty, relative as the trajectory error is (its "
-                 "distance from rk8 at twice its step, or its round-off where larger; not drawn where it is far above "
-                 "the errors): an error below it is not resolved (the table says so of the final error).")
+OWN = ("the reference's own uncertainty, relative as the trajectory error is (its distance from rk8 at twice its step, "
+       "or its round-off where larger)")
+
+
+def reference_own(runs):
+    """What the remark says of the reference's own uncertainty: the grey line, where it reaches the
+    errors' range (`drawn_uncertainty`), or where it lies instead."""
+    own = drawn_uncertainty(comparisons(runs).values())
+    if own is None:
+        return ""
+    side = own[2]
+    if side == "below":
+        largest = max(float(np.max(c.orbit_uncertainty[1:])) for c in comparisons(runs).values()
+                      if c.orbit_uncertainty is not None)
+        return f" Below every error drawn: {OWN}, at most {largest:.1g} of the orbit's size; both errors are resolved."
+    if side == "above":
+        return f" Above every error drawn: {OWN}; no error here is resolved."
+    return (f" The grey dotted line is {OWN}, drawn where it reaches the errors' range: an error below it is not "
+            "resolved (the table says so of the final error).")
 
 
 def remark(runs):
@@ -167,7 +183,7 @@ def remark(runs):
                   "<code>cosymp run</code> measure the final error.")
     else:
         errors = SPLIT.format(against=f"against a reference run, {against}, as in the report (this scene has no "
-                                      "closed-form flow)") + REFERENCE_OWN
+                                      "closed-form flow)") + reference_own(runs)
     return f"<p class='doc'>{PORTRAIT_MARKS} {errors}</p>"
 
 
@@ -213,8 +229,8 @@ class OrbitsView(FeatureView):
         self._shown = which
         self.remark.object = remark(runs)
         figs.update(runs)
-        self.key.object = color_key(runs, OWN_KEY if any(e.comparison.orbit_uncertainty is not None
-                                                         for e in runs.ok) else "") + verdict(runs)
+        own = drawn_uncertainty(comparisons(runs).values())
+        self.key.object = color_key(runs, OWN_KEY if own and not own[2] else "") + verdict(runs)
         self.table.object = pd.DataFrame(numbers(runs))
 
 
