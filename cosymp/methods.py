@@ -272,9 +272,9 @@ def _data(name, theta):
 _TJ4 = _triple_jump([1.0], 2)
 
 METHODS = {m.name: m for m in (
-    Method("euler", "Explicit Euler", "explicit Euler on the extended ODE (non-preserving reference)",
+    Method("euler", "Explicit Euler", "explicit Euler on the extended ODE (non-preserving; the usual method to compare with)",
            1, "none", lambda: _explicit([[0.0]], [1.0], [0.0])),
-    Method("rk4", "Classical RK4", "classical fourth-order Runge-Kutta (non-preserving reference)",
+    Method("rk4", "Classical RK4", "classical fourth-order Runge-Kutta (non-preserving; the usual method to compare with)",
            4, "none", _rk4),
     Method("rk8", "RK8 (DOP853 tableau)", "explicit order-8 Runge-Kutta, DOP853's tableau at a fixed "
            "step; the reference integrator for scenes without a closed-form flow", 8, "none", _rk8),
