@@ -153,7 +153,8 @@ def is_resolved(error, spread):
 
 def unresolved(error, spread):
     """What a table says after a relative error at T that is not resolved (`is_resolved`; spread
-    inf: unbounded), in `cosymp run`'s words; else ''."""
+    inf: unbounded; spread at least 1: the reference has lost the solution), worded as `cosymp
+    run` words an unbounded one; else ''."""
     if error is None or is_resolved(error, spread):
         return ""
     own = ("unbounded, its check at twice its step overflowed" if math.isinf(spread) else

@@ -43,7 +43,7 @@ class Comparison:
     orbit_error: |z - z_ref| relative to the largest |z_ref| so far, the orbit's size
         (diagnostics.errors_over_time): what the trajectory error plots show.
     uncertainty, orbit_uncertainty: a reference run's own uncertainty, relative as error and
-        orbit_error are (an error below it is not resolved); None against the exact flow.
+        orbit_error are (an error at most as large is not resolved); None against the exact flow.
     Pi: mechanical momentum of the trajectory where the scene defines one, else None.
     """
 
@@ -146,8 +146,10 @@ def drawn_uncertainty(comparisons):
     drawn to UNCERTAINTY_OVER times the largest, a gap elsewhere: a plot's axis follows every curve,
     and the uncertainty rose to 1e96 where the reference's check overflows (charged, beta(t) = exp(t),
     T = 8.2: 110 decades, the errors squeezed into a few), and lay eight decades below both errors in
-    the app's first view (they took the plot's top third). side: "below" or "above" where all of it
-    is (every error resolved by far, or none), else "". None without a reference run."""
+    the app's first view (they took the plot's top third). side: "" where some of it is drawn, else
+    "below" or "above" where all of it is (every error resolved by far, or none), or "across" (it
+    passes from below them to above between two records). None without a reference run, or where no
+    error drawn is positive and finite."""
     measured = [c for c in comparisons if c.orbit_uncertainty is not None]
     errors = np.concatenate([c.orbit_error[1:] for c in measured] or [np.empty(0)])
     errors = errors[np.isfinite(errors) & (errors > 0)]
@@ -157,7 +159,7 @@ def drawn_uncertainty(comparisons):
     y = c.orbit_uncertainty[1:]
     low, high = errors.min(), UNCERTAINTY_OVER * errors.max()
     inside = (y >= low) & (y <= high)
-    side = "" if inside.any() else "below" if np.all(y < low) else "above" if np.all(y > high) else ""
+    side = "" if inside.any() else "below" if np.all(y < low) else "above" if np.all(y > high) else "across"
     return c.run.t[1:], np.where(inside, y, np.nan), side
 
 

@@ -10,6 +10,7 @@ import pathlib
 import re
 import time
 import weakref
+from types import SimpleNamespace
 from urllib.parse import parse_qsl, urlsplit
 
 import numpy as np
@@ -29,6 +30,7 @@ from cosymp.reference import reference_final
 from cosymp.scenes import SCENES, first, lead
 from cosymp.study import drawn_uncertainty
 
+EPS = np.finfo(float).eps
 APP = pathlib.Path(__file__).resolve().parent.parent / "app"
 
 
@@ -162,18 +164,54 @@ def test_two_symplectic_methods_get_a_verdict_from_their_bands():
     s = Study(scene="kapitza", method="gauss6", other="gauss4")
     g6, g4 = (float(np.max(np.abs(e.comparison.run.H_ext[:, 0]))) for e in s.results.entries)
     text = common.verdict(s.results)
-    assert (f"both methods are symplectic, and each keeps |H + p_t| in a band: gauss6's bounded band ({g6:.2g}) and "
-            f"gauss4's bounded band ({g4:.2g}). gauss6's is {g4 / g6:.2g}× narrower: its higher order (6 against 4)."
-            ) in text and g4 / g6 > 100
+    said = re.search(r"both methods are symplectic, and each keeps \|H \+ p_t\| in a band: gauss6's bounded band "
+                     r"\(([-0-9.e]+)\) and gauss4's bounded band \(([-0-9.e]+)\)\. gauss6's is ([0-9,]+)× narrower: its "
+                     r"higher order \(6 against 4\)\.", text)
+    assert said and (float(said[1]), float(said[2])) == (float(f"{g6:.2g}"), float(f"{g4:.2g}"))
+    assert int(said[3].replace(",", "")) == round(g4 / g6) and g4 / g6 > 100
     s = Study(scene="kapitza", method="gauss6", other="gauss4", h=0.0005, T=5.0)
     assert common.within_roundoff(s.results.entries[0].comparison.run)
     assert not common.within_roundoff(s.results.entries[1].comparison.run)
-    assert ("gauss6's own error does not show at this h; gauss4's band is its error, the wider for its lower order "
-            "(4 against 6).") in common.verdict(s.results)
+    assert ("gauss6's own error does not show at this h; gauss4's band is its error (order 4, gauss6's 6)."
+            in common.verdict(s.results))
     s = Study(scene="modulated", method="midpoint", other="gauss4")  # T = 50: the bands widen 8-12x
     text = common.verdict(s.results)
     assert "both methods are symplectic; their |H + p_t|: gauss4's band (" in text and "itself" in text
     assert "A band that widens over the run bounds nothing beyond it" in text
+
+
+def _band_entry(method, size, growth, steps=5000, T=10.0, failure=""):
+    """An entry whose run's |H + p_t| oscillates up to `size`, its envelope widening `growth` times
+    from the first to the last tenth, with |H| = 1 (what the verdict reads of a comparison)."""
+    t = np.linspace(0.0, T, steps + 1)
+    err = size / growth * (1 + (growth - 1) * t / T) * (np.sin(7 * t) + 1.1) / 2.1
+    err[0] = 0.0
+    run = SimpleNamespace(H_ext=err[:, None], H=np.ones((steps + 1, 1)), steps=steps, t=t)
+    comparison = SimpleNamespace(run=run, setup=SimpleNamespace(theta=None))
+    return SimpleNamespace(label=method, method=method, failure=failure, final_error=None, comparison=comparison)
+
+
+@pytest.mark.parametrize("bands, said", [
+    # the wider is its steps' rounding (within 2 eps |H| N, widening): "its error" of it was said
+    ((1500, 1.2, 8000, 5.0), ("At this h neither method's own error shows: gauss4's band is its steps' rounding, and "
+                             "gauss6's is narrower still.")),
+    ((1e-6 / EPS, 1.2, 1.04e-6 / EPS, 1.2), ("The two are about as wide (1.04×): at this h neither method's order "
+                                            "sets it apart.")),  # was "1× narrower: its higher order"
+    ((1e-9 / EPS, 1.2, 1.5e-7 / EPS, 1.2), "gauss6's is 150× narrower: its higher order (6 against 4)."),
+])
+def test_two_symplectic_bands_are_compared_only_for_what_they_show(bands, said):
+    a, ga, b, gb = bands
+    runs = SimpleNamespace(entries=[_band_entry("gauss6", a * EPS, ga), _band_entry("gauss4", b * EPS, gb)], T=10.0)
+    text = common.verdict(runs)
+    assert said in text and "is its error" not in text, text
+
+
+def test_a_stopped_symplectic_run_has_its_band_measured_up_to_its_stop():
+    runs = SimpleNamespace(entries=[_band_entry("gauss6", 1e-9, 1.2, T=7.0, failure="Newton"),
+                                    _band_entry("gauss4", 1e-7, 1.2)], T=10.0)
+    text = common.verdict(runs)
+    assert text.startswith("<p class='verdict'>Up to t = 7, where gauss6 stopped (see the message), both methods")
+    assert "gauss6's run stopped at t = 7 (see the message): its band is measured up to there." in text
 
 
 def test_the_verdict_calls_a_band_bounded_only_when_the_data_show_it():
@@ -824,7 +862,7 @@ def test_the_trajectory_error_plot_draws_the_references_own_uncertainty():
     largest = max(float(e.comparison.orbit_uncertainty.max()) for e in s.results.entries)
     assert largest < min(float(e.comparison.orbit_error[1:].min()) for e in s.results.entries)
     assert len(figs.floor.data["x"]) == 0 and orbits.OWN_KEY not in view.key.object
-    assert (f"Below every error drawn: {orbits.OWN}, at most {largest:.1g} of the orbit's size; both errors are "
+    assert (f"Below every error drawn: {orbits.OWN}, at most {largest:.1g} of the orbit's size; every error is "
             "resolved.") in orbits.remark(s.results)
 
 

@@ -173,18 +173,41 @@ def test_the_report_draws_the_first_method_over_the_second(tmp_path):
                 out, err) == 0, err.getvalue()
     spec = json.loads(re.search(r'id="figures" type="application/json">(.*?)</script>', path.read_text(),
                                 re.DOTALL).group(1).replace("<\\/", "</"))
-    own = "the reference's own uncertainty"  # where the trajectory error draws it: a third series beneath
-    assert all([s["alpha"] for s in f["series"][:2]] == [0.7, 1.0] for f in spec)
-    assert all([s["label"] for s in f["series"][2:]] in ([], [own]) for f in spec)
-    # here eight decades below both errors: not drawn (it squeezed them into the plot's top), said instead
-    assert all(len(f["series"]) == 2 for f in spec)
+    assert all([s["alpha"] for s in f["series"]] == [0.7, 1.0] for f in spec)
+    # the reference's own uncertainty, eight decades below both errors here: not drawn (it squeezed them
+    # into the plot's top), said instead
     assert "Every error drawn is above the reference&#x27;s own uncertainty" in path.read_text()
     requests, errors, drawn, answers = open_offline(path, "report-order.png", js=ORDER_JS)
     assert requests == [] and errors == [] and drawn == len(spec) == len(answers["js"])
-    for f, plot in zip(spec, answers["js"]):
-        third = [[own, "dashed"]] if len(f["series"]) == 3 else []
-        assert plot["drawn"] == third + [["rk4", "dashed"], ["midpoint", "solid"]], "uPlot draws the last on top"
-        assert plot["legend"] == ["midpoint", "rk4"] + [s[0] for s in third]
+    for plot in answers["js"]:
+        assert plot["drawn"] == [["rk4", "dashed"], ["midpoint", "solid"]], "uPlot draws the last on top"
+        assert plot["legend"] == ["midpoint", "rk4"]
+
+
+def test_the_references_uncertainty_is_drawn_beneath_the_errors_where_it_reaches_them(tmp_path):
+    """charged, beta(t) = exp(t), T = 8.2: the reference's uncertainty rises through both errors (its
+    step too long for the gyration 2e^t). The trajectory error figure draws it, dashed grey, beneath
+    the two methods and last in the legend, and only within the errors' range (up to 10x the
+    largest: it reaches 1.6e96); the caption says what it is."""
+    path = tmp_path / "charged.html"
+    out, err = io.StringIO(), io.StringIO()
+    assert main(["report", "charged", "--vs", "gauss4", "--set", "beta=exp(t)", "--h", "0.001", "--T", "8.2",
+                 "-o", str(path)], out, err) == 0, err.getvalue()
+    text = path.read_text()
+    spec = json.loads(re.search(r'id="figures" type="application/json">(.*?)</script>', text,
+                                re.DOTALL).group(1).replace("<\\/", "</"))
+    own = "the reference's own uncertainty"
+    error = next(i for i, f in enumerate(spec) if f["title"].startswith("Trajectory error"))
+    assert [len(f["series"]) for f in spec] == [3 if i == error else 2 for i in range(len(spec))]
+    drawn_own = [y for y in spec[error]["series"][2]["y"] if y is not None]
+    largest = max(y for s in spec[error]["series"][:2] for y in s["y"] if y is not None)
+    assert drawn_own and max(drawn_own) <= 10 * largest and spec[error]["series"][2]["y"][-1] is None
+    assert "Below the grey line, the reference&#x27;s own uncertainty" in text
+    requests, errors, drawn, answers = open_offline(path, "report-own.png", js=ORDER_JS)
+    assert requests == [] and errors == [] and drawn == len(spec)
+    plot = answers["js"][error]
+    assert plot["drawn"] == [[own, "dashed"], ["gauss4", "dashed"], ["midpoint", "solid"]]
+    assert plot["legend"] == ["midpoint", "gauss4", own]
 
 
 def test_the_quick_paper_report_has_every_section():

@@ -46,6 +46,7 @@ def color_key(runs, more=""):
 BAND_GROWTH = 2.0
 RESOLVED = 0.1  # a relative |H + p_t| from which a method no longer follows a growing solution's energy
 BIASED = 2.0  # a band within BIASED eps |H| N of N steps is their rounding, accumulated with a bias
+APART_BANDS = 2.0  # two symplectic methods' bands closer than this are about as wide
 
 
 def verdict(runs):
@@ -60,7 +61,8 @@ def verdict(runs):
     (midpoint at h = 2.9 on modulated: 1.5e-13 over 1000 steps, 9.4 times wider at the end; "rk4
     drifts faster than midpoint" was said of it). Where both methods' are round-off, whatever they
     preserve, the verdict says that neither method's own error shows. Where the band
-    grows and |H| with it, the exact solution grows: `growing_verdict` compares relative errors."""
+    grows and |H| with it, the exact solution grows: `growing_verdict` compares relative errors.
+    Two symplectic methods: `both_symplectic` compares their bands."""
     kept, lost = {}, {}
     shown = [e for e in (runs.entries if runs is not None else ()) if e.comparison is not None]
     if len(shown) == 2 and not any(e.failure for e in shown) and all(within_roundoff(e.comparison.run) for e in shown):
@@ -166,10 +168,11 @@ class Band:
 
 
 def both_symplectic(runs, entries):
-    """The verdict where both methods are symplectic (and not both within round-off): each keeps
-    |H + p_t| in a band, whose width is what their order and h decide: which is the narrower and by how
-    much, or that the narrower is only its steps' rounding. As the one-symplectic verdict where either
-    band is lost or the solution's |H| grows."""
+    """The verdict where both methods are symplectic (and not both within round-off of a run to T):
+    each keeps |H + p_t| in a band, whose width is what their order and h decide: which is the
+    narrower and by how much, whether order explains it, or that the narrower (or both) is only its
+    steps' rounding; bands within APART of each other are called about as wide. As the
+    one-symplectic verdict where either band is lost or the solution's |H| grows."""
     until = until_text(runs, entries)
     bands = [Band(e) for e in entries]
     grown = max(b.grown for b in bands)
@@ -184,21 +187,33 @@ def both_symplectic(runs, entries):
     text = (f"<p class='verdict'>{until}, both methods are symplectic"
             + (", and each keeps |H + p_t| in a band: " if all(b.bounded for b in bands) else "; their |H + p_t|: ")
             + f"{narrow.text()} and {wide.text()}. ")
-    if narrow.rounding:
-        text += (f"{n}'s own error does not show at this h; {w}'s band is its error, the wider for its "
-                 + (f"lower order ({orders[1]} against {orders[0]})." if orders[1] < orders[0] else
-                    f"step's error at the same order ({orders[0]})." if orders[0] == orders[1] else
-                    f"error constant, though its order is higher ({orders[1]} against {orders[0]})."))
+    ratio = wide.size / max(narrow.size, np.finfo(float).tiny)
+    if wide.rounding:
+        text += (f"At this h neither method's own error shows: {w}'s band is its steps' rounding, and {n}'s is "
+                 "narrower still.")
+    elif narrow.rounding:
+        text += (f"{n}'s own error does not show at this h; {w}'s band is its error (order {orders[1]}, "
+                 f"{n}'s {orders[0]}).")
+    elif ratio < APART_BANDS:
+        text += f"The two are about as wide ({times(ratio)}): at this h neither method's order sets it apart."
     else:
-        ratio = wide.size / max(narrow.size, np.finfo(float).tiny)
-        text += (f"{n}'s is {ratio:.2g}× narrower: "
+        text += (f"{n}'s is {times(ratio)} narrower: "
                  + (f"its higher order ({orders[0]} against {orders[1]})." if orders[0] > orders[1] else
                     f"the same order ({orders[0]}), a smaller error constant." if orders[0] == orders[1] else
                     f"though its order is lower ({orders[0]} against {orders[1]}), at this h its error constant "
                     "is the smaller."))
+    for b in bands:
+        if b.entry.failure:
+            text += (f" {html.escape(b.entry.label)}'s run stopped at t = {b.run.t[-1]:.6g} (see the message): its band "
+                     "is measured up to there.")
     if not all(b.bounded for b in bands):
         text += " A band that widens over the run bounds nothing beyond it (the Long run tab measures it)."
     return text + "</p>"
+
+
+def times(ratio):
+    """A ratio as the verdicts say it: 1.04×, 36×, 3,600×."""
+    return f"{ratio:.3g}×" if ratio < 10 else f"{ratio:,.0f}×"
 
 
 def both_roundoff(runs, entries):

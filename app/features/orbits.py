@@ -152,7 +152,8 @@ OWN = ("the reference's own uncertainty, relative as the trajectory error is (it
 
 def reference_own(runs):
     """What the remark says of the reference's own uncertainty: the grey line, where it reaches the
-    errors' range (`drawn_uncertainty`), or where it lies instead."""
+    errors' range (`drawn_uncertainty`), or where it lies instead (nothing without a reference, or
+    without a positive error drawn)."""
     own = drawn_uncertainty(comparisons(runs).values())
     if own is None:
         return ""
@@ -160,9 +161,12 @@ def reference_own(runs):
     if side == "below":
         largest = max(float(np.max(c.orbit_uncertainty[1:])) for c in comparisons(runs).values()
                       if c.orbit_uncertainty is not None)
-        return f" Below every error drawn: {OWN}, at most {largest:.1g} of the orbit's size; both errors are resolved."
+        return f" Below every error drawn: {OWN}, at most {largest:.1g} of the orbit's size; every error is resolved."
     if side == "above":
         return f" Above every error drawn: {OWN}; no error here is resolved."
+    if side == "across":
+        return (f" {OWN[0].upper()}{OWN[1:]} passes from below every error drawn to above them all between two records: "
+                "the errors after that are not resolved.")
     return (f" The grey dotted line is {OWN}, drawn where it reaches the errors' range: an error below it is not "
             "resolved (the table says so of the final error).")
 

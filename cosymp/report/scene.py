@@ -150,6 +150,8 @@ def _uncertainty_caption(own):
         return f"Every error drawn is above {what}: all are resolved."
     if own[2] == "above":
         return f"Every error drawn is below {what}: none is resolved."
+    if own[2] == "across":
+        return f"{what[0].upper()}{what[1:]} passes from below every error drawn to above them all between two records."
     return f"Below the grey line, {what}, drawn where it reaches the errors' range, an error is not resolved."
 
 
