@@ -145,20 +145,21 @@ def reference_final(setup, h, T, z0=None, skip=""):
 
 
 def is_resolved(error, spread):
-    """Whether a relative error at T is resolved: above its reference's own relative uncertainty
-    (spread; None or 0: the exact flow's). Not at equality: rk8 at h measured against rk8 at h/2,
-    its reference, is that reference's check, and its error the uncertainty itself."""
-    return not spread or not error <= spread
+    """Whether relative errors at T (a number or an array, with their spreads) are resolved: above
+    their reference's own relative uncertainty (spread; None or 0: the exact flow's). Not at
+    equality: rk8 at h measured against rk8 at h/2, its reference, is that reference's check, and
+    its error the uncertainty itself."""
+    return spread is None or ~((np.asarray(spread) > 0) & (np.asarray(error) <= spread))
 
 
 def unresolved(error, spread):
     """What a table says after a relative error at T that is not resolved (`is_resolved`; spread
-    inf: unbounded; spread at least 1: the reference has lost the solution), worded as `cosymp
+    inf: unbounded; spread above 1: the reference has lost the solution), worded as `cosymp
     run` words an unbounded one; else ''."""
     if error is None or is_resolved(error, spread):
         return ""
     own = ("unbounded, its check at twice its step overflowed" if math.isinf(spread) else
-           f"{spread:.1e}, more than |z_ref| itself: the reference has lost the solution" if spread >= 1 else
+           f"{spread:.1e}, more than |z_ref| itself: the reference has lost the solution" if spread > 1 else
            f"{spread:.1e}")
     return f" (not resolved: the reference's own uncertainty is {own})"
 

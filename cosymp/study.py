@@ -10,6 +10,7 @@ come from the records.
 import dataclasses
 import time
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -136,20 +137,45 @@ def with_reference(comparison, reference, h):
 
 
 UNCERTAINTY_OVER = 10.0  # how far above the errors the reference's uncertainty is drawn (above it: a gap)
+OWN = ("the reference's own uncertainty, relative as the trajectory error is (its distance from rk8 at twice its step, "
+       "or its round-off where larger)")
+
+
+class DrawnUncertainty(NamedTuple):
+    """The reference run's own uncertainty as the trajectory error plots draw it (`drawn_uncertainty`):
+    t, y (NaN where not drawn); side: "" where some of it is drawn, else "below" or "above" where all
+    of it is (every error resolved by far, or none), or "across" (it passes from below them to above
+    between two records); largest, its largest value."""
+
+    t: np.ndarray
+    y: np.ndarray
+    side: str
+    largest: float
+
+    @property
+    def text(self):
+        """What a plot of the errors says of it: the app under its plots, a report in its caption."""
+        if self.side == "below":
+            return f"Below every error drawn: {OWN}, at most {self.largest:.1g} of the orbit's size; every error is resolved."
+        if self.side == "above":
+            return f"Above every error drawn: {OWN}; no error here is resolved."
+        if self.side == "across":
+            return (f"{OWN[0].upper()}{OWN[1:]} passes from below every error drawn to above them all between two "
+                    "records: the errors after that are not resolved.")
+        return (f"The grey line is {OWN}, drawn where it reaches the errors' range: an error below it is not resolved "
+                "(the table says so of the final error).")
 
 
 def drawn_uncertainty(comparisons):
-    """(t, y, side): the reference run's own uncertainty as the trajectory error plots draw it,
-    relative to the orbit's size, from the first step (0 at t = 0), of the comparison that reached
-    furthest (they share the reference; a stopped run is rerun at a finer stride, so more records do
-    not mean further). Drawn only within the errors' own range, from the smallest positive error
-    drawn to UNCERTAINTY_OVER times the largest, a gap elsewhere: a plot's axis follows every curve,
-    and the uncertainty rose to 1e96 where the reference's check overflows (charged, beta(t) = exp(t),
-    T = 8.2: 110 decades, the errors squeezed into a few), and lay eight decades below both errors in
-    the app's first view (they took the plot's top third). side: "" where some of it is drawn, else
-    "below" or "above" where all of it is (every error resolved by far, or none), or "across" (it
-    passes from below them to above between two records). None without a reference run, or where no
-    error drawn is positive and finite."""
+    """The DrawnUncertainty of the comparisons' reference, relative to the orbit's size, from the
+    first step (0 at t = 0), of the comparison that reached furthest (they share the reference; a
+    stopped run is rerun at a finer stride, so more records do not mean further). Drawn only within
+    the errors' own range, from the smallest positive error drawn to UNCERTAINTY_OVER times the
+    largest, a gap elsewhere: a plot's axis follows every curve, and the uncertainty rose to 1e96
+    where the reference's check overflows (charged, beta(t) = exp(t), T = 8.2: 110 decades, the
+    errors squeezed into a few), and lay eight decades below both errors in the app's first view (they
+    took the plot's top third). None without a reference run, or where no error drawn is positive
+    and finite."""
     measured = [c for c in comparisons if c.orbit_uncertainty is not None]
     errors = np.concatenate([c.orbit_error[1:] for c in measured] or [np.empty(0)])
     errors = errors[np.isfinite(errors) & (errors > 0)]
@@ -160,7 +186,7 @@ def drawn_uncertainty(comparisons):
     low, high = errors.min(), UNCERTAINTY_OVER * errors.max()
     inside = (y >= low) & (y <= high)
     side = "" if inside.any() else "below" if np.all(y < low) else "above" if np.all(y > high) else "across"
-    return c.run.t[1:], np.where(inside, y, np.nan), side
+    return DrawnUncertainty(c.run.t[1:], np.where(inside, y, np.nan), side, float(np.max(y)))
 
 
 def compare_until_failure(setup, h, T, **options):

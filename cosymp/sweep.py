@@ -44,7 +44,7 @@ from .errors import CosympError, InputError, as_number, quoted
 from .integrate import Setup, check_step, get_scene
 from .methods import THETA_APPLIES
 from .methods import method as get_method
-from .reference import check_reference, reference_final, relative_final
+from .reference import check_reference, is_resolved, reference_final, relative_final
 from .workprecision import check_horizon, scan
 
 MEASURES = ("H_ext_max_abs", "det_max_dev", "error_final", "growth")
@@ -614,7 +614,7 @@ def summary(result):
         lines.append(f"  {k}: min {np.nanmin(v):.4g}, max {np.nanmax(v):.4g} (at {at})")
     if "error_final" in p.measures:
         error, own = result.values["error_final"], result.values[UNCERTAINTY]
-        unresolved = int(np.sum((error <= own) & (own > 0)))  # as reference.is_resolved
+        unresolved = int(np.sum(~is_resolved(error, own)))
         if unresolved:
             lines.append(f"  {unresolved} point{'s' if unresolved > 1 else ''} with error_final at most its reference's "
                          f"own uncertainty: not resolved (the column {UNCERTAINTY})")

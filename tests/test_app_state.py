@@ -28,10 +28,15 @@ from cosymp.integrate import check_step
 from cosymp.methods import METHODS
 from cosymp.reference import reference_final
 from cosymp.scenes import SCENES, first, lead
-from cosymp.study import drawn_uncertainty
+from cosymp.study import OWN, drawn_uncertainty
 
 EPS = np.finfo(float).eps
 APP = pathlib.Path(__file__).resolve().parent.parent / "app"
+
+
+def said(runs):
+    """The Orbits view's text under its plots for these runs."""
+    return orbits.remark(runs, drawn_uncertainty(common.comparisons(runs).values()))
 
 
 def drawn(view):
@@ -143,7 +148,7 @@ def test_the_final_error_without_an_exact_flow_is_the_reports_and_the_verdict_sa
     largest = [float(np.nanmax(e.comparison.orbit_error)) for e in (midpoint, rk4)]
     assert (f"{midpoint.label}'s trajectory error is the larger, though (up to {largest[0]:.2g} against "
             f"{largest[1]:.2g} of the orbit's size over the run)") in common.verdict(s.results)
-    assert "against a reference run, rk8 at h" in orbits.remark(s.results)
+    assert "against a reference run, rk8 at h" in said(s.results)
     figs = shown_figures(drawn(orbits.OrbitsView(s)))
     assert plotted(figs.error).size > 0
     for e in s.results.entries:
@@ -151,7 +156,7 @@ def test_the_final_error_without_an_exact_flow_is_the_reports_and_the_verdict_sa
     assert "Nothing bounds it over longer runs" in common.verdict(s.results), "no claim the data do not show"
     s.T = 500  # 1e5 steps at h 0.005: its reference, 3e5 rk8 steps, would be too long for a live view
     assert all(e.final_error is None for e in s.results.entries) and "error is the larger" not in common.verdict(s.results)
-    assert "more than 2e+05 rk8 steps" in orbits.remark(s.results)
+    assert "more than 2e+05 rk8 steps" in said(s.results)
     damped = Study(scene="damped")
     assert [e.final_error for e in damped.results.entries] == [e.comparison.error[-1] for e in damped.results.entries]
 
@@ -508,14 +513,14 @@ def test_scenes_of_one_shape_share_the_portraits_relabelled_with_fresh_ranges():
     fig = figs.portraits[0][1]
     ranges, tags = (fig.x_range, fig.y_range), list(fig.tags)
     assert [c.code for c in fig.js_property_callbacks["change:tags"]] == [plotting.RESET_RANGES]
-    assert len(figs.grid.objects) == 3 and "against the exact flow" in orbits.remark(s.results)
+    assert len(figs.grid.objects) == 3 and "against the exact flow" in said(s.results)
     title = figs.error.fig.title.text
     for scene in ("decaying", "modulated", "kapitza"):
         tags = list(fig.tags)
         s.scene = scene
         assert shown_figures(view) is figs and (fig.x_range, fig.y_range) == ranges and fig.tags != tags
         assert fig.yaxis.axis_label == "p" and "phase portrait" in fig.title.text and len(view.grids) == 1
-    assert "reference run, rk8 at h" in orbits.remark(s.results) and plotted(figs.error).size > 0
+    assert "reference run, rk8 at h" in said(s.results) and plotted(figs.error).size > 0
     assert figs.error.fig.title.text == title, "one title: a changed title lays out the tab"
     s.scene = "charged"
     assert fig.title.text == "phase portrait" and len(view.grids) == 2
@@ -807,7 +812,7 @@ def test_a_reference_that_overflows_leaves_the_comparison_shown_without_errors()
     assert float(stopped[1]) - s.h < float(stopped[2]) <= float(stopped[1])
     assert s.message.level == "warning" and "no error is measured: the reference for the error at T" in s.message.text
     # under the plots too (the notice goes after a few seconds), not "would take more than 2e+05 rk8 steps"
-    assert f"no trajectory error: {html.escape(r.reference_failure)}." in orbits.remark(r)
+    assert f"no trajectory error: {html.escape(r.reference_failure)}." in said(r)
 
 
 @pytest.mark.parametrize("T", [8.2, 8.5])
@@ -840,7 +845,7 @@ def test_the_trajectory_error_plot_draws_the_references_own_uncertainty():
     view = drawn(orbits.OrbitsView(s))
     figs = shown_figures(view)
     c = s.results.entries[0].comparison
-    t, own, side = drawn_uncertainty(common.comparisons(s.results).values())
+    t, own, side, _ = drawn_uncertainty(common.comparisons(s.results).values())
     assert side == "" and np.array_equal(t, c.run.t[1:]) and np.isfinite(own).sum() > 1000
     x, y = plotting.peaks(t, own)
     assert np.array_equal(figs.floor.data["x"], x) and np.array_equal(figs.floor.data["y"], y, equal_nan=True)
@@ -851,19 +856,19 @@ def test_the_trajectory_error_plot_draws_the_references_own_uncertainty():
     assert all(0 < e.final_uncertainty < 1e-12 and e.final_error > e.final_uncertainty for e in s.results.entries)
     assert [col[3] for col in list(common.numbers(s.results).values())[1:]] == [
         plotting.fmt(e.final_error) for e in s.results.entries]
-    assert "grey dotted line is the reference's own uncertainty" in orbits.remark(s.results)
+    assert "grey line is the reference's own uncertainty" in said(s.results)
     assert orbits.OWN_KEY in view.key.object, "in the key above the plots, beside the methods"
     s.scene = "damped"
     figs = shown_figures(view)
     assert len(figs.floor.data["x"]) == 0 and all(e.final_uncertainty is None for e in s.results.entries)
-    assert "grey dotted" not in orbits.remark(s.results) and orbits.OWN_KEY not in view.key.object
+    assert "grey line" not in said(s.results) and orbits.OWN_KEY not in view.key.object
     s.scene = "modulated"  # its first view: both errors eight decades above it, which drew them in the top third
     figs = shown_figures(view)
     largest = max(float(e.comparison.orbit_uncertainty.max()) for e in s.results.entries)
     assert largest < min(float(e.comparison.orbit_error[1:].min()) for e in s.results.entries)
     assert len(figs.floor.data["x"]) == 0 and orbits.OWN_KEY not in view.key.object
-    assert (f"Below every error drawn: {orbits.OWN}, at most {largest:.1g} of the orbit's size; every error is "
-            "resolved.") in orbits.remark(s.results)
+    assert (f"Below every error drawn: {OWN}, at most {largest:.1g} of the orbit's size; every error is "
+            "resolved.") in said(s.results)
 
 
 def test_rk8_against_its_own_check_and_errors_of_rounding_are_not_read_as_order():

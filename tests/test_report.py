@@ -176,7 +176,7 @@ def test_the_report_draws_the_first_method_over_the_second(tmp_path):
     assert all([s["alpha"] for s in f["series"]] == [0.7, 1.0] for f in spec)
     # the reference's own uncertainty, eight decades below both errors here: not drawn (it squeezed them
     # into the plot's top), said instead
-    assert "Every error drawn is above the reference&#x27;s own uncertainty" in path.read_text()
+    assert "Below every error drawn: the reference&#x27;s own uncertainty" in path.read_text()
     requests, errors, drawn, answers = open_offline(path, "report-order.png", js=ORDER_JS)
     assert requests == [] and errors == [] and drawn == len(spec) == len(answers["js"])
     for plot in answers["js"]:
@@ -202,7 +202,7 @@ def test_the_references_uncertainty_is_drawn_beneath_the_errors_where_it_reaches
     drawn_own = [y for y in spec[error]["series"][2]["y"] if y is not None]
     largest = max(y for s in spec[error]["series"][:2] for y in s["y"] if y is not None)
     assert drawn_own and max(drawn_own) <= 10 * largest and spec[error]["series"][2]["y"][-1] is None
-    assert "Below the grey line, the reference&#x27;s own uncertainty" in text
+    assert "The grey line is the reference&#x27;s own uncertainty" in text
     requests, errors, drawn, answers = open_offline(path, "report-own.png", js=ORDER_JS)
     assert requests == [] and errors == [] and drawn == len(spec)
     plot = answers["js"][error]

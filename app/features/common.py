@@ -171,7 +171,7 @@ def both_symplectic(runs, entries):
     """The verdict where both methods are symplectic (and not both within round-off of a run to T):
     each keeps |H + p_t| in a band, whose width is what their order and h decide: which is the
     narrower and by how much, whether order explains it, or that the narrower (or both) is only its
-    steps' rounding; bands within APART of each other are called about as wide. As the
+    steps' rounding; bands within APART_BANDS of each other are called about as wide. As the
     one-symplectic verdict where either band is lost or the solution's |H| grows."""
     until = until_text(runs, entries)
     bands = [Band(e) for e in entries]
@@ -331,7 +331,6 @@ def numbers(runs):
         cells[NUMBER_ROWS.index("final relative error")] += unresolved(e.final_error, e.final_uncertainty)
         cols[e.label] = cells + [e.failure or (ended(e.comparison.run, runs.T) if e.comparison is not None else "")]
     return cols
-
 
 
 def reached(run, T):

@@ -107,7 +107,8 @@ class Figures:
             fig.xaxis.axis_label, fig.yaxis.axis_label = xl, yl
         self.reset()
 
-    def update(self, runs):
+    def update(self, runs, own):
+        """Draw the runs, and the reference's uncertainty `own` (study.drawn_uncertainty)."""
         cs = comparisons(runs)
         per_axis = len(SLOTS) if self.split else 1
         for k, ((slot, _, drawn), last) in enumerate(zip(self.portraits, self.tails)):
@@ -128,8 +129,7 @@ class Figures:
         self.error.colors(names(runs))
         self.error.set(over_time(runs, lambda c: (c.run.t[1:], c.orbit_error[1:]) if c.error is not None
                                  else (None, None), logy=True))  # 0 at t = 0
-        own = drawn_uncertainty(cs.values())
-        x, y = peaks(*own[:2]) if own and not own[2] else (EMPTY, EMPTY)
+        x, y = peaks(own.t, own.y) if own and not own.side else (EMPTY, EMPTY)
         self.floor.data = {"x": x, "y": y}
 
     def reset(self):
@@ -146,35 +146,13 @@ SPLIT = ("Two errors. <b>Energy</b>: |H + p_t|, 0 for the exact flow, which a st
          "the table's final relative error divides by |z_ref| at T.")
 
 OWN_KEY = swatch(FLOOR_COLOR, "the reference's own uncertainty (trajectory error)", dotted=True)
-OWN = ("the reference's own uncertainty, relative as the trajectory error is (its distance from rk8 at twice its step, "
-       "or its round-off where larger)")
 
 
-def reference_own(runs):
-    """What the remark says of the reference's own uncertainty: the grey line, where it reaches the
-    errors' range (`drawn_uncertainty`), or where it lies instead (nothing without a reference, or
-    without a positive error drawn)."""
-    own = drawn_uncertainty(comparisons(runs).values())
-    if own is None:
-        return ""
-    side = own[2]
-    if side == "below":
-        largest = max(float(np.max(c.orbit_uncertainty[1:])) for c in comparisons(runs).values()
-                      if c.orbit_uncertainty is not None)
-        return f" Below every error drawn: {OWN}, at most {largest:.1g} of the orbit's size; every error is resolved."
-    if side == "above":
-        return f" Above every error drawn: {OWN}; no error here is resolved."
-    if side == "across":
-        return (f" {OWN[0].upper()}{OWN[1:]} passes from below every error drawn to above them all between two records: "
-                "the errors after that are not resolved.")
-    return (f" The grey dotted line is {OWN}, drawn where it reaches the errors' range: an error below it is not "
-            "resolved (the table says so of the final error).")
-
-
-def remark(runs):
+def remark(runs, own):
     """How the portraits mark a run, the two errors the plots split, and what the trajectory is
-    measured against: the exact flow, or a reference run for a scene without one (or nothing, when
-    that run would be too long for a live view)."""
+    measured against: the exact flow, or a reference run for a scene without one, with its own
+    uncertainty `own` (study.drawn_uncertainty) (or nothing, when that run would be too long for a
+    live view)."""
     against = next((e.comparison.against for e in runs.ok if e.comparison.against), None)
     if SCENES[runs.scene].has_flow:
         errors = SPLIT.format(against="against the exact flow")
@@ -187,7 +165,7 @@ def remark(runs):
                   "<code>cosymp run</code> measure the final error.")
     else:
         errors = SPLIT.format(against=f"against a reference run, {against}, as in the report (this scene has no "
-                                      "closed-form flow)") + reference_own(runs)
+                                      "closed-form flow)") + (f" {own.text}" if own else "")
     return f"<p class='doc'>{PORTRAIT_MARKS} {errors}</p>"
 
 
@@ -231,10 +209,10 @@ class OrbitsView(FeatureView):
         for other in self._figures.values():
             other.grid.visible = other is figs
         self._shown = which
-        self.remark.object = remark(runs)
-        figs.update(runs)
         own = drawn_uncertainty(comparisons(runs).values())
-        self.key.object = color_key(runs, OWN_KEY if own and not own[2] else "") + verdict(runs)
+        self.remark.object = remark(runs, own)
+        figs.update(runs, own)
+        self.key.object = color_key(runs, OWN_KEY if own and not own.side else "") + verdict(runs)
         self.table.object = pd.DataFrame(numbers(runs))
 
 

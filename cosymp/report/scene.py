@@ -133,26 +133,12 @@ def _orbit_figures(scene, runs):
     if all(c.error is not None for _, c in runs):
         # with the reference run's own uncertainty, relative as the errors are (0 at t = 0: drawn from the first step)
         own = drawn_uncertainty([c for _, c in runs])
-        drawn = own is not None and not own[2]
+        drawn = own is not None and not own.side
         figs.append(Figure(f"Trajectory error against {runs[0][1].against}, relative to the orbit's size", "t",
                            ORBIT_ERROR, _series(runs, lambda c: (c.run.t, c.orbit_error))
-                           + ([Series("the reference's own uncertainty", *own[:2], dash=True, color=UNCERTAINTY_COLOR)]
-                              if drawn else []), logy=True, caption=_uncertainty_caption(own)))
+                           + ([Series("the reference's own uncertainty", own.t, own.y, dash=True, color=UNCERTAINTY_COLOR)]
+                              if drawn else []), logy=True, caption=own.text if own else ""))
     return figs
-
-
-def _uncertainty_caption(own):
-    """What the trajectory error figure says of the reference's own uncertainty (study.drawn_uncertainty)."""
-    what = "the reference's own uncertainty (its distance from rk8 at twice its step, or its round-off where larger)"
-    if own is None:
-        return ""
-    if own[2] == "below":
-        return f"Every error drawn is above {what}: all are resolved."
-    if own[2] == "above":
-        return f"Every error drawn is below {what}: none is resolved."
-    if own[2] == "across":
-        return f"{what[0].upper()}{what[1:]} passes from below every error drawn to above them all between two records."
-    return f"Below the grey line, {what}, drawn where it reaches the errors' range, an error is not resolved."
 
 
 def against(runs):
