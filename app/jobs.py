@@ -261,6 +261,12 @@ class Job(param.Parameterized):
         if self._held is not None:
             self._held.release()
 
+    def let_go(self):
+        """The result shown (HOLD) is no longer shown: its memory goes back."""
+        if self._held is not None:
+            self._held.release()
+            self._held = None
+
     def refresh(self):
         """Compute from the current inputs now, in this thread (a page's first results)."""
         self._wanted += 1

@@ -13,6 +13,7 @@ import html
 import math
 from concurrent.futures import ThreadPoolExecutor
 from functools import cache
+from typing import NamedTuple
 from urllib.parse import urlencode
 
 import panel as pn
@@ -21,7 +22,7 @@ import param
 from cosymp.errors import InputError, RunError
 from cosymp.integrate import Setup, check_step, default_stride
 from cosymp.methods import METHODS
-from cosymp.reference import fine_steps, reference_states
+from cosymp.reference import SEGMENT, fine_steps, reference_states, refinement
 from cosymp.report import render
 from cosymp.report.scene import command as report_command
 from cosymp.report.scene import scene_report
@@ -41,13 +42,17 @@ LIVE_MAX_STEPS = 2_000_000
 # views (40-50 ms) took two at 0.03, the page laid out and painted between them.
 QUICK_S = 0.06
 SECONDS_PER_STEP = {}  # (scene, method, other) -> what its last comparison in this server took per step
-LIVE_REFERENCE_STEPS = 200_000  # a fine rk8 reference for the final error takes at most this many steps (~0.1 s)
+LIVE_REFERENCE_STEPS = 200_000  # a fine rk8 reference computed with its comparison takes at most this many steps (~0.15 s)
+# A longer one is computed after its comparison is shown (LateReference), up to this many steps (about 15 s here).
+LATE_REFERENCE_STEPS = 20_000_000
 CLOUD_POINTS = {True: 32, False: 64}
 DELTA = 1e-4
 # A comparison peaks at 20-28 bytes per value its runs record (charged 20; 28-39 before compare ran on
 # the fused driver, which forms no array of tangent maps; tracemalloc, tests/test_app_state.py checks
 # that the lease is at least the peak and at most twice it).
 BYTES_PER_RECORDED = 40
+BYTES_PER_REFERENCE_VALUE = 12  # a reference's peak (`reference_bytes`) per value it keeps,
+BYTES_PER_SEGMENT_VALUE = 64  # and per value of a segment's records
 
 
 def expected_quick(rate, h, T):
@@ -73,8 +78,8 @@ def note_rate(rates, key, run, steps):
 
 def comparison_bytes(setups, h, T):
     """Peak memory of comparing the setups (study.compare: 2n + 2 members with increments, and
-    their tangent maps), from the values the runs record, and of their reference where one is
-    computed (`reference_bytes`)."""
+    their tangent maps), from the values the runs record, and of their reference where it is
+    computed with them (`takes_reference`, `reference_bytes`)."""
     steps = check_step(h, T)
     total = 0
     for s in setups:
@@ -82,17 +87,18 @@ def comparison_bytes(setups, h, T):
         members = m + 2
         records = steps // default_stride(steps, members, m, increments=True) + 1
         total += records * members * (m + 1)
-    return BYTES_PER_RECORDED * total + (reference_bytes(setups[0], h, T) if setups else 0)
+    own = reference_bytes(setups[0], h, T) if setups and takes_reference(setups[0], h, T) else 0
+    return BYTES_PER_RECORDED * total + own
 
 
 def reference_bytes(setup, h, T):
-    """Peak memory of the reference (`live_reference`; 0 where none is computed): a state (2n + 1
-    values) per step h. Its two rk8 runs, the reference and its check, each record t, z, p_t and H
-    at every step h; the distances between them are taken in blocks (92-126 bytes a step h on
-    kapitza and charged, tracemalloc; 40 per value leases 120 and 200)."""
-    if not takes_reference(setup, h, T):
-        return 0
-    return BYTES_PER_RECORDED * (check_step(h, T) + 1) * (2 * setup.scene.ndof + 1)
+    """Peak memory of the reference of a run of setup (`cosymp.reference.reference_states`): a
+    state and its uncertainty (2n + 1 values) at every step h, which it keeps, and the records of
+    its two rk8 runs over one segment, which it does not (tracemalloc: 8.6-10.4 bytes per value
+    kept on long runs, 38-44 per value of a segment's records on short ones, kapitza and charged)."""
+    steps = check_step(h, T)
+    segment = min(steps, SEGMENT // refinement(setup, h)) + 1
+    return (2 * setup.scene.ndof + 1) * (BYTES_PER_REFERENCE_VALUE * (steps + 1) + BYTES_PER_SEGMENT_VALUE * segment)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -118,6 +124,7 @@ class Runs:
     T: float
     entries: tuple
     reference_failure: str = ""  # where and why the reference run stopped (run_pair)
+    awaits: object = None  # the Awaited reference computed after these runs are shown (LateReference)
 
     @property
     def ok(self):
@@ -142,10 +149,37 @@ def compare_until_failure(setup, h, T):
 
 
 def takes_reference(setup, h, T):
-    """Whether a comparison of setup measures its errors against a reference run: where the scene
-    has no exact flow and the run (rk8 at a fine step, as in the report) takes at most
-    LIVE_REFERENCE_STEPS steps."""
+    """Whether a comparison of setup computes the reference its errors are measured against with
+    its runs: where the scene has no exact flow and the reference (rk8 at a fine step, as in the
+    report) takes at most LIVE_REFERENCE_STEPS steps."""
     return not setup.scene.has_flow and fine_steps(setup, h, T) <= LIVE_REFERENCE_STEPS
+
+
+class Awaited(NamedTuple):
+    """A reference computed after its comparison is shown: key (`reference_key`), label (which run it
+    is) and the rk8 steps it takes."""
+
+    key: tuple
+    label: str
+    steps: float
+
+
+def awaited(setup, h, T, state):
+    """The Awaited reference of a comparison of setup with these inputs (study.Study's `state`), or
+    None: where the scene has no exact flow and the reference is longer than a live one
+    (`takes_reference`) and at most LATE_REFERENCE_STEPS steps."""
+    if setup.scene.has_flow:
+        return None
+    steps = fine_steps(setup, h, T)
+    if not LIVE_REFERENCE_STEPS < steps <= LATE_REFERENCE_STEPS:
+        return None
+    return Awaited(reference_key(state), f"rk8 at h/{refinement(setup, h)}", steps)
+
+
+def reference_key(state):
+    """What a comparison's reference depends on, from the study's inputs: the scene, its values, h and
+    T (not the methods)."""
+    return state["scene"], tuple(sorted(state["values"].items())), state["h"], state["T"]
 
 
 def live_reference(setup, h, T):
@@ -163,8 +197,9 @@ def final_error(comparison, failure):
     return float(comparison.error[-1]), None if spread is None else float(spread[-1])
 
 
-def run_pair(scene, setups, h, T):
-    """Compare the setups and compute the reference (all at once, in threads) and return Runs."""
+def run_pair(scene, setups, h, T, awaits=None):
+    """Compare the setups and compute the reference (all at once, in threads) and return Runs; with
+    `awaits` (an Awaited), the reference is left to be computed after the runs are shown."""
     with ThreadPoolExecutor(len(setups) + 1) as pool:
         reference = pool.submit(live_reference, setups[0], h, T)
         done = list(pool.map(lambda s: compare_until_failure(s, h, T), setups))
@@ -180,10 +215,21 @@ def run_pair(scene, setups, h, T):
         label = s.method.label(s.theta)
         if any(e.label == label for e in entries):
             label += " (2)"
+        entries.append(Entry(label, s.method.name, comparison, failure))
+    return measured(Runs(scene, h, T, tuple(entries), awaits=awaits), reference, stopped)
+
+
+def measured(runs, reference, stopped=""):
+    """The runs with their errors measured against the reference (None: the exact flow's, already
+    in their comparisons, or none, `stopped` saying why the reference failed, if it did)."""
+    entries = []
+    for e in runs.entries:
+        comparison = e.comparison
         if comparison is not None and reference is not None:
-            comparison = with_reference(comparison, reference, h)
-        entries.append(Entry(label, s.method.name, comparison, failure, *final_error(comparison, failure)))
-    return Runs(scene, h, T, tuple(entries), stopped)
+            comparison = with_reference(comparison, reference, runs.h)
+        error, spread = final_error(comparison, e.failure)
+        entries.append(dataclasses.replace(e, comparison=comparison, final_error=error, final_uncertainty=spread))
+    return dataclasses.replace(runs, entries=tuple(entries), reference_failure=stopped)
 
 
 def failure_note(runs):
@@ -223,6 +269,71 @@ def inputs_class(scene_name):
             params[p.name] = param.Number(default=float(p.default), softbounds=(lo, hi), step=(hi - lo) / 500,
                                           doc=p.doc, label=p.name)
     return param.parameterized_class(f"{scene_name.title()}Inputs", params)
+
+
+class LateReference(Job):
+    """The reference of a comparison too long to compute with it (`awaited`), computed in its thread
+    from the moment the comparison starts (beside it), with progress and cancel, and kept for the
+    study's runs that await it: a change of method measures the new runs against the kept one at
+    once. Its memory is held while runs measured against it are shown."""
+
+    KIND = "reference run"
+    WHAT = "this reference run"
+    HOLD = True
+
+    def __init__(self, study, **params):
+        super().__init__(**params)
+        self.study = study
+        self.asked = None  # (Awaited, setup, h, T) of the reference asked for last
+        self.kept = None  # (key, Reference or None, why it failed): the last one computed
+        self._said = ""
+
+    def ask(self, awaits, setup, h, T):
+        """Compute the reference `awaits` (an Awaited; None: none is awaited now) unless it is the
+        one kept or being computed; one being computed for other inputs is stopped."""
+        if awaits is not None and self.asked is not None and self.asked[0].key == awaits.key:
+            return
+        self.asked = None if awaits is None else (awaits, setup, h, T)
+        self.discard()
+        if awaits is not None and (self.kept is None or self.kept[0] != awaits.key):
+            self.progress = 0.0  # the runs awaiting it may be shown before it starts
+            self.request()
+
+    def drop(self):
+        """The kept reference is no longer shown: it and its memory go."""
+        self.kept = None
+        self.let_go()
+
+    def say(self, note):
+        """Kept for the runs awaiting the reference, whose failure it is (`Study.arrived` says it)."""
+        self._said = note.text
+
+    def _inputs(self):
+        return self.asked
+
+    def _bytes(self, inputs):
+        return reference_bytes(*inputs[1:])
+
+    def _compute(self, inputs, run):
+        try:
+            return reference_states(*inputs[1:], progress=run.report), ""
+        except RunError as err:
+            return None, str(err)
+
+    def _finish(self, inputs, result):
+        self._settle(inputs, *result)
+
+    def _refused(self):
+        self._settle(self.asked, None, self._said)
+
+    def _failed(self, inputs):
+        self._settle(inputs, None, self._said)
+
+    def _settle(self, inputs, reference, failure):
+        self.kept = (inputs[0].key, reference, failure)
+        if reference is None:  # nothing is kept to hold memory for
+            self.let_go()
+        self.study.arrived(self.kept)
 
 
 FIRST_VIEW = first_view()
@@ -270,6 +381,7 @@ class Study(Job):
                 self.values = {}
         self._nested = False
         self._syncing = False
+        self.late = LateReference(self)
         try:
             self.inputs = self._make_inputs()
         except InputError as err:
@@ -285,6 +397,20 @@ class Study(Job):
                        "other": FIRST_VIEW["other"]})
             self.inputs = self._make_inputs()
             self.refresh()
+
+    def release(self):
+        super().release()
+        self.late.release()
+
+    def arrived(self, kept):
+        """A LateReference's (key, Reference or None, why it failed): the runs shown that await it
+        are measured against it."""
+        runs = self.results
+        if runs is None or runs.awaits is None or runs.awaits.key != kept[0]:
+            return
+        self.results = dataclasses.replace(measured(runs, *kept[1:]), awaits=None)
+        if kept[2]:
+            self.say(failure_note(self.results))
 
     def say(self, note):
         """Post a message (a repeated message is posted again)."""
@@ -408,12 +534,22 @@ class Study(Job):
     def _bytes(self, inputs):
         return comparison_bytes(*inputs[1:4])
 
+    def _started(self, inputs):
+        """The reference awaited by this comparison starts beside it (or the one under way stops)."""
+        _, setups, h, T, state = inputs
+        self.late.ask(awaited(setups[0], h, T, state), setups[0], h, T)
+
     def _compute(self, inputs, run):
-        scene, setups, h, T, _ = inputs
-        return run_pair(scene, setups, h, T)
+        scene, setups, h, T, state = inputs
+        return run_pair(scene, setups, h, T, awaited(setups[0], h, T, state))
 
     def _finish(self, inputs, runs):
         self._good = inputs[4]
+        kept = self.late.kept
+        if runs.awaits is not None and kept is not None and kept[0] == runs.awaits.key:
+            runs = dataclasses.replace(measured(runs, *kept[1:]), awaits=None)
+        elif kept is not None:
+            self.late.drop()
         self.results = runs
         note_ = failure_note(runs)
         if note_:

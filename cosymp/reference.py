@@ -6,12 +6,13 @@ import numpy as np
 
 from . import warm
 from .diagnostics import distance, norm, reference_size, relative_error
+from .drive import Drive
 from .errors import InputError, RunError
 from .integrate import MAX_STEPS, Setup, check_step, exact_flow, initial_states, simulate
 from .kernels.loops import energies, vector_field
 
 REFERENCE_FRACTION = 0.02
-BLOCK = 4096  # records whose uncertainty reference_states computes at once
+SEGMENT = 1 << 16  # rk8 steps of reference_states's compiled calls (about 50 ms on kapitza)
 
 
 def check_reference(setup, h, T, skip=""):
@@ -56,28 +57,44 @@ class Reference(NamedTuple):
     spread: np.ndarray
 
 
-def reference_states(setup, h, T, z0=None):
+def reference_states(setup, h, T, z0=None, progress=None):
     """The Reference of a run of setup with step h to T: a fine rk8 run of its scene and parameters
     from z0 (the scene's initial condition by default), at every multiple of h up to the run's final
     time steps*h, its step h/k no larger than 2% of the scene's time scale, and its check at twice
     that step (reference_final's uncertainty, at each of them; infinite from where the check
-    overflows). For the scenes without an exact flow; failures as for reference_final."""
+    overflows). For the scenes without an exact flow; failures as for reference_final.
+
+    Both runs go in compiled calls of about SEGMENT rk8 steps, continued as one run (the states
+    are one call's to the bit), each followed by progress(done, steps) in steps of h where given:
+    a caller stops the reference there by raising from it. Only the states at the multiples of h
+    are kept."""
     steps = check_step(h, T)
     check_reference(setup, h, T)
     k = refinement(setup, h)
     fine = Setup.make(setup.scene, "rk8", setup.values)
-    a = _fine_run(fine, h, k, steps * h, z0, k, "")
+    a = Drive(fine, h / k, z0=z0, every=0, energy=False, maps=False)
+    b = Drive(fine, 2 * h / k, z0=z0, every=0, energy=False, maps=False)
+    states = np.empty((steps + 1, a.Z.shape[1]))
     spread = np.full(steps + 1, np.inf)
-    try:
-        b = simulate(fine, 2 * h / k, steps * h, z0=z0, stride=k // 2)
-    except RunError as e:  # up to where it overflowed
-        b = e.partial
-    # In blocks: distance's temporaries over every record at once took 2.3x the two runs' own memory.
-    reached = len(b.t)
-    for i in range(0, reached, BLOCK):
-        rows = slice(i, min(i + BLOCK, reached))
-        spread[rows] = uncertainty(a.z[rows, 0], b.z[rows, 0], k * np.arange(rows.start, rows.stop))
-    return Reference(a.z[:, 0], f"rk8 at h/{k}", spread)
+    states[0], spread[0] = a.Z[0], 0.0
+    each = max(1, SEGMENT // k)
+    for start in range(0, steps, each):
+        n = min(each, steps - start)
+        rows = slice(start, start + n + 1)
+        try:
+            states[rows] = a.record(n * k, k)[0].z[:, 0]
+        except RunError as e:
+            raise _failed(f"rk8 at h/{k}, {OVERFLOWS}", e, h, "") from None
+        if not b.failure:
+            try:
+                check = b.record(n * k // 2, k // 2)[0]
+            except RunError as e:  # up to where it overflowed; unbounded from there
+                check = e.partial
+            reached = slice(start, start + len(check.t))
+            spread[reached] = uncertainty(states[reached], check.z[:, 0], k * np.arange(reached.start, reached.stop))
+        if progress is not None:
+            progress(start + n, steps)
+    return Reference(states, f"rk8 at h/{k}", spread)
 
 
 def uncertainty(a, b, fine):

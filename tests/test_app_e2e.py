@@ -159,6 +159,28 @@ def test_every_control_and_tab_keeps_every_request_local_and_the_console_clean(p
     page.check()
 
 
+def test_a_reference_too_long_for_a_live_view_follows_its_runs_with_progress(page):
+    """Charged at h = 0.15 to T = 30000: the runs (2e5 steps) come first, the text under the plots
+    says their reference (3.2e6 rk8 steps) is being computed and how far it is, and the final errors
+    and the trajectory error follow (before, there was no trajectory error at all)."""
+    page.open(query(scene="charged", h="0.15"))
+    page.page.wait_for_selector(TABLE_ROW)
+    horizon = page.page.get_by_label("Horizon T")
+    horizon.fill("30000")
+    horizon.press("Enter")
+    expect(page.page.locator("p.doc", has_text="It is being computed (")).to_contain_text(
+        "rk8 at h/16, 3.2e+06 steps", timeout=WAIT_MS)
+    awaiting = page.numbers()
+    assert ["steps", "200,000", "200,000"] in awaiting and ["final relative error", "–", "–"] in awaiting
+    page.shot("late-reference-computing")
+    expect(page.page.locator("p.doc", has_text="against a reference run, rk8 at h/16")).to_be_visible(timeout=WAIT_MS)
+    page.wait_for_numbers_change(awaiting)
+    final = next(r for r in page.numbers() if r[0] == "final relative error")
+    assert all(re.fullmatch(r"[0-9.e+-]+", cell) for cell in final[1:]), final
+    page.shot("late-reference-arrived")
+    page.check()
+
+
 def test_a_preset_link_opens_its_figure(page):
     from app.presets import PRESETS
 

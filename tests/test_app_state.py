@@ -154,9 +154,9 @@ def test_the_final_error_without_an_exact_flow_is_the_reports_and_the_verdict_sa
     for e in s.results.entries:
         assert e.comparison.error[0] == 0.0 and e.comparison.error[-1] == e.final_error
     assert "Nothing bounds it over longer runs" in common.verdict(s.results), "no claim the data do not show"
-    s.T = 500  # 1e5 steps at h 0.005: its reference, 3e5 rk8 steps, would be too long for a live view
-    assert all(e.final_error is None for e in s.results.entries) and "error is the larger" not in common.verdict(s.results)
-    assert "more than 2e+05 rk8 steps" in said(s.results)
+    s.T = 500  # 1e5 steps at h 0.005: its reference, 4e5 rk8 steps, too long to go with the runs, follows them
+    assert s.late.kept[0] == ("kapitza", (), 0.005, 500.0) and s.results.awaits is None
+    assert all(e.final_error is not None for e in s.results.entries) and "rk8 at h/4" in said(s.results)
     damped = Study(scene="damped")
     assert [e.final_error for e in damped.results.entries] == [e.comparison.error[-1] for e in damped.results.entries]
 
@@ -813,6 +813,95 @@ def test_a_reference_that_overflows_leaves_the_comparison_shown_without_errors()
     assert s.message.level == "warning" and "no error is measured: the reference for the error at T" in s.message.text
     # under the plots too (the notice goes after a few seconds), not "would take more than 2e+05 rk8 steps"
     assert f"no trajectory error: {html.escape(r.reference_failure)}." in said(r)
+
+
+def test_a_reference_too_long_to_go_with_its_runs_follows_them_and_measures_what_it_would_have(monkeypatch):
+    """A reference over LIVE_REFERENCE_STEPS (kapitza at T = 500: no trajectory error at all before)
+    is computed by the study's LateReference, started with the comparison: the runs are shown
+    awaiting it, the text under the plots says it is being computed, and when it arrives the runs
+    are measured against it exactly as a reference computed with them measures them."""
+    monkeypatch.setattr(study, "LIVE_REFERENCE_STEPS", 0)
+    asked = []
+    monkeypatch.setattr(study.LateReference, "request", lambda self: asked.append(self.asked[0]))
+    s = Study(scene="kapitza")
+    awaiting = s.results
+    assert awaiting.awaits == study.Awaited(("kapitza", (), s.h, s.T), "rk8 at h/4", 16_000) and asked == [awaiting.awaits]
+    assert all(e.final_error is None and e.comparison.error is None for e in awaiting.entries)
+    assert ("the trajectory error is measured against a reference run, rk8 at h/4, 1.6e+04 steps, longer than a "
+            "live view computes with its runs. It is being computed (0 % done)") in said(awaiting)
+    jobs.Job.request(s.late)  # computed here, to the end (no server)
+    late = s.results
+    assert late.awaits is None and s.late.kept[0] == awaiting.awaits.key and s.late._held is not None
+    monkeypatch.setattr(study, "LIVE_REFERENCE_STEPS", 10**9)
+    live = Study(scene="kapitza").results
+    untimed = lambda runs: {k: v[:5] + v[7:] for k, v in common.numbers(runs).items()}  # but the two times
+    assert live.awaits is None and said(late) == said(live) and untimed(late) == untimed(live)
+    for a, b in zip(late.entries, live.entries):
+        assert a.final_error == b.final_error and a.final_uncertainty == b.final_uncertainty
+        assert np.array_equal(a.comparison.error, b.comparison.error) and a.comparison.against == "rk8 at h/4"
+
+
+def test_a_late_reference_is_kept_for_a_change_of_method_and_let_go_with_its_inputs(monkeypatch):
+    """The reference depends on the scene, its values, h and T, not on the methods: a change of method
+    measures the new runs against the kept one at once; another T computes another; a scene with an
+    exact flow lets it and its memory go. A reference asked for again while it is computed is not
+    asked for twice."""
+    monkeypatch.setattr(study, "LIVE_REFERENCE_STEPS", 0)
+    computed = []
+    real = study.reference_states
+    monkeypatch.setattr(study, "reference_states", lambda *a, **k: computed.append(a[1:3]) or real(*a, **k))
+    s = Study(scene="kapitza")
+    held = s.late._held
+    assert computed == [(s.h, s.T)] and s.results.entries[0].final_error is not None
+    s.method = "gauss4"
+    assert computed == [(s.h, s.T)] and s.late._held is held and s.results.entries[0].comparison.against == "rk8 at h/4"
+    assert s.results.entries[0].final_error is not None and s.results.awaits is None
+    s.T = 30.0
+    assert computed[-1] == (s.h, 30.0) and len(computed) == 2 and held.nbytes == 0, "the first one's lease went back"
+    used = memory.BUDGET.used
+    s.scene = "damped"
+    assert s.late.kept is None and s.late._held is None and memory.BUDGET.used < used
+    asked = []
+    monkeypatch.setattr(study.LateReference, "request", lambda self: asked.append(self.asked[0].key))
+    s.scene = "kapitza"
+    s.late.ask(study.awaited(s.setups()[0], s.h, s.T, s._good), s.setups()[0], s.h, s.T)
+    assert asked == [("kapitza", (), s.h, s.T)], "asked again while it is asked for: not twice"
+    s.release()
+    assert s.late._closed
+
+
+def test_a_late_reference_that_fails_or_is_refused_says_why_under_the_plots(monkeypatch):
+    """beta(t) = exp(t): the reference overflows, as a live one does, with the same words; a
+    reference the memory cap refuses leaves the runs without errors, and says so."""
+    monkeypatch.setattr(study, "LIVE_REFERENCE_STEPS", 0)
+    s = Study(scene="charged")
+    s.values = {"beta": "exp(t)"}
+    failed = s.results
+    monkeypatch.setattr(study, "LIVE_REFERENCE_STEPS", 10**9)
+    live = Study(scene="charged", values={"beta": "exp(t)"}).results
+    assert failed.reference_failure == live.reference_failure and "rk8 at h/2, leaves floating-point range" in \
+        failed.reference_failure and failed.awaits is None and s.late._held is None
+    assert s.message.text == f"no error is measured: {failed.reference_failure}" or \
+        s.message.text.endswith(f"| no error is measured: {failed.reference_failure}")
+    assert f"no trajectory error: {html.escape(failed.reference_failure)}." in said(failed)
+    monkeypatch.setattr(study, "LIVE_REFERENCE_STEPS", 0)
+    setups = Study(scene="kapitza").setups()
+    cap = study.comparison_bytes(setups, 0.005, 20.0) + study.reference_bytes(setups[0], 0.005, 20.0) // 2
+    monkeypatch.setattr(memory, "BUDGET", memory.MemoryBudget(cap_bytes=cap))
+    s = Study(scene="kapitza")
+    refused = s.results
+    assert refused.awaits is None and all(e.final_error is None for e in refused.entries)
+    assert refused.reference_failure.startswith("this reference run needs about") and "MB are free" in said(refused)
+    assert s.message.level == "warning" and refused.reference_failure in s.message.text
+
+
+def test_a_reference_longer_than_a_late_one_is_said_to_be_left_out(monkeypatch):
+    monkeypatch.setattr(study, "LIVE_REFERENCE_STEPS", 0)
+    monkeypatch.setattr(study, "LATE_REFERENCE_STEPS", 1000)
+    monkeypatch.setattr(orbits, "LATE_REFERENCE_STEPS", 1000)
+    s = Study(scene="kapitza")
+    assert s.results.awaits is None and s.late.asked is None and s.late.kept is None
+    assert "its reference would take more than 1e+03 rk8 steps here: no trajectory error plot" in said(s.results)
 
 
 @pytest.mark.parametrize("T", [8.2, 8.5])

@@ -15,7 +15,7 @@ from cosymp.diagnostics import (
     tangent_maps,
 )
 from cosymp.integrate import initial_states, simulate
-from cosymp.reference import reference_final, reference_states, scipy_reference
+from cosymp.reference import SEGMENT, reference_final, reference_states, refinement, scipy_reference
 from cosymp.scenes import SCENES
 
 
@@ -122,6 +122,38 @@ def test_the_reference_runs_uncertainty_at_every_step_bounds_its_error_and_ends_
     z_ref, spread = reference_final(s, h, 8.0)
     assert np.array_equal(short.states[-1], z_ref[0]) and short.spread[-1] == pytest.approx(spread[0], rel=1e-12)
     assert short.spread[0] == 0.0
+
+
+def test_the_reference_goes_in_segments_that_continue_one_run_and_report_their_progress():
+    """reference_states runs rk8 in compiled calls of about SEGMENT steps (progress and a place to stop
+    between them): its states are one simulate call's, to the bit, and a progress callback that
+    raises stops it after that segment."""
+    s = setup("kapitza", "midpoint")
+    h, T = 0.01, 50.0  # k = 6: 10923 steps of h a segment, five segments
+    k = refinement(s, h)
+    seen = []
+    ref = reference_states(s, h, T, progress=lambda done, total: seen.append((done, total)))
+    whole = simulate(setup("kapitza", "rk8"), h / k, T, stride=k)
+    assert np.array_equal(ref.states, whole.z[:, 0]) and len(seen) == -(-5000 // (SEGMENT // k)) == 1
+    h, T = 0.00125, 50.0  # k = 2: 32768 steps of h a segment, two segments
+    steps = 40_000
+    seen.clear()
+    ref = reference_states(s, h, T, progress=lambda done, total: seen.append((done, total)))
+    whole = simulate(setup("kapitza", "rk8"), h / 2, T, stride=2)
+    assert refinement(s, h) == 2 and np.array_equal(ref.states, whole.z[:, 0]) and np.isfinite(ref.spread).all()
+    assert seen == [(SEGMENT // 2, steps), (steps, steps)]
+
+    class Stop(Exception):
+        pass
+
+    def stop(done, total):
+        seen.append(done)
+        raise Stop
+
+    seen.clear()
+    with pytest.raises(Stop):
+        reference_states(s, h, T, progress=stop)
+    assert seen == [SEGMENT // 2]
 
 
 @pytest.mark.parametrize("method", ["gauss4", "composition6", "rk4"])

@@ -28,7 +28,7 @@ from ..plotting import (
     swatch,
     table,
 )
-from ..study import LIVE_REFERENCE_STEPS
+from ..study import LATE_REFERENCE_STEPS
 from .base import Feature, FeatureView
 from .common import (
     EMPTY,
@@ -148,20 +148,26 @@ SPLIT = ("Two errors. <b>Energy</b>: |H + p_t|, 0 for the exact flow, which a st
 OWN_KEY = swatch(FLOOR_COLOR, "the reference's own uncertainty (trajectory error)", dotted=True)
 
 
-def remark(runs, own):
+def remark(runs, own, done=0.0):
     """How the portraits mark a run, the two errors the plots split, and what the trajectory is
     measured against: the exact flow, or a reference run for a scene without one, with its own
-    uncertainty `own` (study.drawn_uncertainty) (or nothing, when that run would be too long for a
-    live view)."""
+    uncertainty `own` (study.drawn_uncertainty); a reference computed after the runs are shown
+    (runs.awaits) is said to be under way, `done` its fraction; one too long for a live view is
+    said to be left out."""
     against = next((e.comparison.against for e in runs.ok if e.comparison.against), None)
     if SCENES[runs.scene].has_flow:
         errors = SPLIT.format(against="against the exact flow")
     elif runs.reference_failure:  # said here too: the message's notice goes after a few seconds
         errors = (f"No closed-form flow for this scene, and no trajectory error: "
                   f"{html.escape(runs.reference_failure)}.")
+    elif runs.awaits is not None:
+        errors = (f"No closed-form flow for this scene: the trajectory error is measured against a reference run, "
+                  f"{runs.awaits.label}, {runs.awaits.steps:.3g} steps, longer than a live view computes with its "
+                  f"runs. It is being computed ({100 * done:.0f} % done): the trajectory error and the final errors "
+                  "follow.")
     elif against is None:
         errors = (f"No closed-form flow for this scene, and its reference would take more than "
-                  f"{LIVE_REFERENCE_STEPS:.0e} rk8 steps here: no trajectory error plot; the report or "
+                  f"{LATE_REFERENCE_STEPS:.0e} rk8 steps here: no trajectory error plot; the report or "
                   "<code>cosymp run</code> measure the final error.")
     else:
         errors = SPLIT.format(against=f"against a reference run, {against}, as in the report (this scene has no "
@@ -180,6 +186,7 @@ class OrbitsView(FeatureView):
         self.remark = note("")
         self.table = table([""])
         self.follow(self.study, "results")
+        self.study.late.param.watch(lambda event: self._progress(), ["progress"])
         return pn.Column(self.key, self.grids, self.remark, note(NUMBERS_TEXT), self.table,
                          sizing_mode="stretch_width")
 
@@ -198,6 +205,12 @@ class OrbitsView(FeatureView):
         shapes = dict.fromkeys(shape(name, False, False) for name in SCENES)
         return super().ahead() + [partial(self.figures, key) for key in shapes]
 
+    def _progress(self):
+        """The awaited reference's progress, in the text under the plots."""
+        runs = self.study.results
+        if self.visible and runs is not None and runs.awaits is not None:
+            self.remark.object = remark(runs, None, self.study.late.progress)
+
     def update(self):
         runs = self.study.results
         if runs is None:
@@ -210,7 +223,7 @@ class OrbitsView(FeatureView):
             other.grid.visible = other is figs
         self._shown = which
         own = drawn_uncertainty(comparisons(runs).values())
-        self.remark.object = remark(runs, own)
+        self.remark.object = remark(runs, own, self.study.late.progress)
         figs.update(runs, own)
         self.key.object = color_key(runs, OWN_KEY if own and not own.side else "") + verdict(runs)
         self.table.object = pd.DataFrame(numbers(runs))
