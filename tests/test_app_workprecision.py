@@ -84,6 +84,10 @@ def test_the_plots_draw_every_finite_point_and_the_targets_table_names_the_ratio
     cost = wp.targets(m.rows)["cost"][1e-6]["rk4"]
     assert f"{cost:.2e} s" in table["error 1e-06"]
     assert views.reference_html(m.rows) == "<p class='doc'>Reference: exact flow.</p>"
+    rows = [{"reference": "rk8 at h/4", "reference_uncertainty": u} for u in (2e-13, math.inf, 5e-12)]
+    assert views.reference_html(rows) == ("<p class='doc'>Reference: rk8 at h/4 (relative uncertainty up to 5.0e-12: "
+                                          "errors at most as large are not resolved).</p>"), \
+        "an error equal to its reference's uncertainty is not resolved (reference.is_resolved), not only smaller ones"
 
 
 def test_failed_runs_are_not_plotted_but_listed():

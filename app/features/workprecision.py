@@ -527,7 +527,7 @@ def reference_html(rows):
         return ""
     unc = max((r["reference_uncertainty"] for r in rows if finite(r["reference_uncertainty"])), default=0.0)
     return (f"<p class='doc'>Reference: {html.escape(str(rows[0]['reference']))}"
-            + (f" (relative uncertainty up to {unc:.1e}: smaller errors are not resolved)" if unc > 0 else "")
+            + (f" (relative uncertainty up to {unc:.1e}: errors at most as large are not resolved)" if unc > 0 else "")
             + ".</p>")
 
 
