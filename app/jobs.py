@@ -138,7 +138,8 @@ class Run:
             ended = self.finished.is_set()  # read first: what was reported before the end is read below
             if self.latest != shown and (ended or time.perf_counter() >= told + PROGRESS_S):
                 shown = self.latest
-                on_progress(*shown)
+                if not self.discarded:
+                    on_progress(*shown)
                 told = time.perf_counter()
             if self.partial is not None and (ended or time.perf_counter() >= drawn + interval):
                 partial, self.partial = self.partial, None
@@ -262,10 +263,12 @@ class Job(param.Parameterized):
             self._held.release()
 
     def let_go(self):
-        """The result shown (HOLD) is no longer shown: its memory goes back."""
+        """The result shown (HOLD) is no longer shown: its memory goes back, and the last run lets it go."""
         if self._held is not None:
             self._held.release()
             self._held = None
+        if self.run is not None and self.run.finished.is_set():
+            self.run.result = None
 
     def refresh(self):
         """Compute from the current inputs now, in this thread (a page's first results)."""

@@ -155,13 +155,17 @@ def takes_reference(setup, h, T):
     return not setup.scene.has_flow and fine_steps(setup, h, T) <= LIVE_REFERENCE_STEPS
 
 
-class Awaited(NamedTuple):
+@dataclasses.dataclass(frozen=True)
+class Awaited:
     """A reference computed after its comparison is shown: key (`reference_key`), label (which run it
-    is) and the rk8 steps it takes."""
+    is), the rk8 steps it takes, and the setup, h and T it is computed for."""
 
     key: tuple
     label: str
     steps: float
+    setup: object = dataclasses.field(compare=False, repr=False)
+    h: float = dataclasses.field(compare=False)
+    T: float = dataclasses.field(compare=False)
 
 
 def awaited(setup, h, T, state):
@@ -173,7 +177,7 @@ def awaited(setup, h, T, state):
     steps = fine_steps(setup, h, T)
     if not LIVE_REFERENCE_STEPS < steps <= LATE_REFERENCE_STEPS:
         return None
-    return Awaited(reference_key(state), f"rk8 at h/{refinement(setup, h)}", steps)
+    return Awaited(reference_key(state), f"rk8 at h/{refinement(setup, h)}", steps, setup, h, T)
 
 
 def reference_key(state):
@@ -271,11 +275,22 @@ def inputs_class(scene_name):
     return param.parameterized_class(f"{scene_name.title()}Inputs", params)
 
 
+class Kept(NamedTuple):
+    """What a LateReference computed for a key: the Reference, or None and why not (failure); final
+    where the same inputs give the same (a reference, or its own overflow), not where the server
+    refused or failed it (memory), which is tried again."""
+
+    key: tuple
+    reference: object
+    failure: str
+    final: bool
+
+
 class LateReference(Job):
     """The reference of a comparison too long to compute with it (`awaited`), computed in its thread
     from the moment the comparison starts (beside it), with progress and cancel, and kept for the
     study's runs that await it: a change of method measures the new runs against the kept one at
-    once. Its memory is held while runs measured against it are shown."""
+    once. Its memory is held while it is kept."""
 
     KIND = "reference run"
     WHAT = "this reference run"
@@ -284,23 +299,26 @@ class LateReference(Job):
     def __init__(self, study, **params):
         super().__init__(**params)
         self.study = study
-        self.asked = None  # (Awaited, setup, h, T) of the reference asked for last
-        self.kept = None  # (key, Reference or None, why it failed): the last one computed
+        self.asked = None  # the Awaited asked for last
+        self.kept = None  # the Kept of the last one computed
         self._said = ""
 
-    def ask(self, awaits, setup, h, T):
-        """Compute the reference `awaits` (an Awaited; None: none is awaited now) unless it is the
-        one kept or being computed; one being computed for other inputs is stopped."""
-        if awaits is not None and self.asked is not None and self.asked[0].key == awaits.key:
+    def ask(self, awaits):
+        """Compute the reference `awaits` (an Awaited; None: none is awaited now) unless it is being
+        computed or kept. One being computed for other inputs is stopped; one kept for other inputs,
+        or refused, goes, and its memory with it (the runs measured against it keep their errors)."""
+        if awaits is not None and self.busy and self.asked is not None and self.asked.key == awaits.key:
             return
-        self.asked = None if awaits is None else (awaits, setup, h, T)
         self.discard()
-        if awaits is not None and (self.kept is None or self.kept[0] != awaits.key):
+        if self.kept is not None and (awaits is None or self.kept.key != awaits.key or not self.kept.final):
+            self.drop()
+        self.asked = awaits
+        if awaits is not None and self.kept is None:
             self.progress = 0.0  # the runs awaiting it may be shown before it starts
             self.request()
 
     def drop(self):
-        """The kept reference is no longer shown: it and its memory go."""
+        """The kept reference goes, and its memory."""
         self.kept = None
         self.let_go()
 
@@ -311,29 +329,29 @@ class LateReference(Job):
     def _inputs(self):
         return self.asked
 
-    def _bytes(self, inputs):
-        return reference_bytes(*inputs[1:])
+    def _bytes(self, a):
+        return reference_bytes(a.setup, a.h, a.T)
 
-    def _compute(self, inputs, run):
+    def _compute(self, a, run):
         try:
-            return reference_states(*inputs[1:], progress=run.report), ""
-        except RunError as err:
+            return reference_states(a.setup, a.h, a.T, progress=run.report), ""
+        except RunError as err:  # its own overflow: the same inputs overflow again
             return None, str(err)
 
-    def _finish(self, inputs, result):
-        self._settle(inputs, *result)
+    def _finish(self, a, result):
+        self._settle(Kept(a.key, *result, final=True))
 
     def _refused(self):
-        self._settle(self.asked, None, self._said)
+        self._settle(Kept(self.asked.key, None, self._said, final=False))
 
-    def _failed(self, inputs):
-        self._settle(inputs, None, self._said)
+    def _failed(self, a):
+        self._settle(Kept(a.key, None, self._said, final=False))
 
-    def _settle(self, inputs, reference, failure):
-        self.kept = (inputs[0].key, reference, failure)
-        if reference is None:  # nothing is kept to hold memory for
+    def _settle(self, kept):
+        self.kept = kept
+        if kept.reference is None:  # nothing is kept to hold memory for
             self.let_go()
-        self.study.arrived(self.kept)
+        self.study.arrived(kept)
 
 
 FIRST_VIEW = first_view()
@@ -403,13 +421,12 @@ class Study(Job):
         self.late.release()
 
     def arrived(self, kept):
-        """A LateReference's (key, Reference or None, why it failed): the runs shown that await it
-        are measured against it."""
+        """A LateReference's Kept: the runs shown that await it are measured against it."""
         runs = self.results
-        if runs is None or runs.awaits is None or runs.awaits.key != kept[0]:
+        if runs is None or runs.awaits is None or runs.awaits.key != kept.key:
             return
-        self.results = dataclasses.replace(measured(runs, *kept[1:]), awaits=None)
-        if kept[2]:
+        self.results = dataclasses.replace(measured(runs, kept.reference, kept.failure), awaits=None)
+        if kept.failure:
             self.say(failure_note(self.results))
 
     def say(self, note):
@@ -525,6 +542,8 @@ class Study(Job):
         the previous beta)."""
         if {k: getattr(self, k) for k in self.INPUTS} == inputs[4]:
             self._restore()
+        # Its start stopped the reference the runs shown await: asked for again.
+        self.late.ask(self.results.awaits if self.results is not None else None)
 
     def _inputs(self):
         setups = self.setups()
@@ -537,7 +556,7 @@ class Study(Job):
     def _started(self, inputs):
         """The reference awaited by this comparison starts beside it (or the one under way stops)."""
         _, setups, h, T, state = inputs
-        self.late.ask(awaited(setups[0], h, T, state), setups[0], h, T)
+        self.late.ask(awaited(setups[0], h, T, state))
 
     def _compute(self, inputs, run):
         scene, setups, h, T, state = inputs
@@ -546,10 +565,8 @@ class Study(Job):
     def _finish(self, inputs, runs):
         self._good = inputs[4]
         kept = self.late.kept
-        if runs.awaits is not None and kept is not None and kept[0] == runs.awaits.key:
-            runs = dataclasses.replace(measured(runs, *kept[1:]), awaits=None)
-        elif kept is not None:
-            self.late.drop()
+        if runs.awaits is not None and kept is not None and kept.key == runs.awaits.key:
+            runs = dataclasses.replace(measured(runs, kept.reference, kept.failure), awaits=None)
         self.results = runs
         note_ = failure_note(runs)
         if note_:

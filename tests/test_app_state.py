@@ -1,5 +1,6 @@
 """The app's states and views, without a server or a browser: what each view plots, the study's
 validation, the follower views, the long run, presets, and the memory budget."""
+import asyncio
 import dataclasses
 import gc
 import html
@@ -8,6 +9,7 @@ import json
 import math
 import pathlib
 import re
+import threading
 import time
 import weakref
 from types import SimpleNamespace
@@ -23,7 +25,7 @@ from app.features import cloud, common, gauges, longrun, orbits, structure, thet
 from app.plotting import DENSE, POINTS, Raster
 from app.presets import PRESETS, URL_NAMES, case_state, first_state, parse_items, query_items
 from app.study import QUICK_S, Study
-from cosymp.errors import RunError
+from cosymp.errors import InputError, RunError
 from cosymp.integrate import check_step
 from cosymp.methods import METHODS
 from cosymp.reference import reference_final
@@ -32,6 +34,16 @@ from cosymp.study import OWN, drawn_uncertainty
 
 EPS = np.finfo(float).eps
 APP = pathlib.Path(__file__).resolve().parent.parent / "app"
+
+
+def settled(s):
+    """Run the loop until the study's LateReference is done. Without a server a comparison that is not
+    quick runs on a loop of its own, until it ends; a reference it asked for is a task of that loop,
+    which goes on only while the loop runs (the loop Panel made last, so call this right after the
+    change)."""
+    loop = asyncio.get_event_loop()
+    while s.late.running:
+        loop.run_until_complete(asyncio.sleep(0.02))
 
 
 def said(runs):
@@ -155,7 +167,8 @@ def test_the_final_error_without_an_exact_flow_is_the_reports_and_the_verdict_sa
         assert e.comparison.error[0] == 0.0 and e.comparison.error[-1] == e.final_error
     assert "Nothing bounds it over longer runs" in common.verdict(s.results), "no claim the data do not show"
     s.T = 500  # 1e5 steps at h 0.005: its reference, 4e5 rk8 steps, too long to go with the runs, follows them
-    assert s.late.kept[0] == ("kapitza", (), 0.005, 500.0) and s.results.awaits is None
+    settled(s)
+    assert s.late.kept.key == ("kapitza", (), 0.005, 500.0) and s.results.awaits is None
     assert all(e.final_error is not None for e in s.results.entries) and "rk8 at h/4" in said(s.results)
     damped = Study(scene="damped")
     assert [e.final_error for e in damped.results.entries] == [e.comparison.error[-1] for e in damped.results.entries]
@@ -822,16 +835,18 @@ def test_a_reference_too_long_to_go_with_its_runs_follows_them_and_measures_what
     are measured against it exactly as a reference computed with them measures them."""
     monkeypatch.setattr(study, "LIVE_REFERENCE_STEPS", 0)
     asked = []
-    monkeypatch.setattr(study.LateReference, "request", lambda self: asked.append(self.asked[0]))
+    monkeypatch.setattr(study.LateReference, "request", lambda self: asked.append(self.asked))
     s = Study(scene="kapitza")
     awaiting = s.results
-    assert awaiting.awaits == study.Awaited(("kapitza", (), s.h, s.T), "rk8 at h/4", 16_000) and asked == [awaiting.awaits]
+    a = awaiting.awaits
+    assert (a.key, a.label, a.steps, a.h, a.T) == (("kapitza", (), s.h, s.T), "rk8 at h/4", 16_000, s.h, s.T)
+    assert asked == [a]
     assert all(e.final_error is None and e.comparison.error is None for e in awaiting.entries)
     assert ("the trajectory error is measured against a reference run, rk8 at h/4, 1.6e+04 steps, longer than a "
             "live view computes with its runs. It is being computed (0 % done)") in said(awaiting)
     jobs.Job.request(s.late)  # computed here, to the end (no server)
     late = s.results
-    assert late.awaits is None and s.late.kept[0] == awaiting.awaits.key and s.late._held is not None
+    assert late.awaits is None and s.late.kept.key == a.key and s.late._held is not None
     monkeypatch.setattr(study, "LIVE_REFERENCE_STEPS", 10**9)
     live = Study(scene="kapitza").results
     untimed = lambda runs: {k: v[:5] + v[7:] for k, v in common.numbers(runs).items()}  # but the two times
@@ -844,8 +859,7 @@ def test_a_reference_too_long_to_go_with_its_runs_follows_them_and_measures_what
 def test_a_late_reference_is_kept_for_a_change_of_method_and_let_go_with_its_inputs(monkeypatch):
     """The reference depends on the scene, its values, h and T, not on the methods: a change of method
     measures the new runs against the kept one at once; another T computes another; a scene with an
-    exact flow lets it and its memory go. A reference asked for again while it is computed is not
-    asked for twice."""
+    exact flow lets it and its memory go (and the reference itself: the last run lets it go)."""
     monkeypatch.setattr(study, "LIVE_REFERENCE_STEPS", 0)
     computed = []
     real = study.reference_states
@@ -857,17 +871,65 @@ def test_a_late_reference_is_kept_for_a_change_of_method_and_let_go_with_its_inp
     assert computed == [(s.h, s.T)] and s.late._held is held and s.results.entries[0].comparison.against == "rk8 at h/4"
     assert s.results.entries[0].final_error is not None and s.results.awaits is None
     s.T = 30.0
+    settled(s)
     assert computed[-1] == (s.h, 30.0) and len(computed) == 2 and held.nbytes == 0, "the first one's lease went back"
     used = memory.BUDGET.used
     s.scene = "damped"
-    assert s.late.kept is None and s.late._held is None and memory.BUDGET.used < used
-    asked = []
-    monkeypatch.setattr(study.LateReference, "request", lambda self: asked.append(self.asked[0].key))
-    s.scene = "kapitza"
-    s.late.ask(study.awaited(s.setups()[0], s.h, s.T, s._good), s.setups()[0], s.h, s.T)
-    assert asked == [("kapitza", (), s.h, s.T)], "asked again while it is asked for: not twice"
+    assert s.late.kept is None and s.late._held is None and memory.BUDGET.used < used and s.late.run.result is None
     s.release()
     assert s.late._closed
+
+
+def test_under_a_running_loop_the_runs_come_first_and_their_reference_follows_whatever_came_between(monkeypatch):
+    """As in a server: the comparison is shown awaiting its reference, which computes beside it. A
+    new T stops that reference and computes the new one; a comparison that fails as a whole (its
+    inputs put back) asks again for the reference its runs on screen await, which its start had
+    stopped (they said 'being computed' for ever); the one that arrives measures the runs shown."""
+    monkeypatch.setattr(study, "LIVE_REFERENCE_STEPS", 0)
+    gate, started = threading.Event(), []
+    real = study.reference_states
+
+    def held(setup, h, T, progress):  # waits for the gate, stopping when cancelled (progress raises)
+        started.append(T)
+        while not gate.is_set():
+            progress(0, 1)
+            time.sleep(0.005)
+        return real(setup, h, T, progress=progress)
+
+    monkeypatch.setattr(study, "reference_states", held)
+
+    async def until(test):
+        for _ in range(2000):
+            if test():
+                return
+            await asyncio.sleep(0.005)
+        raise AssertionError("timed out")
+
+    async def scenario():
+        s = Study(scene="kapitza")
+        assert s.results.awaits.key[3] == 20.0 and all(e.final_error is None for e in s.results.entries)
+        await until(lambda: started == [20.0])
+        s.T = 30.0
+        await until(lambda: not s.running and s.results.T == 30.0)
+        assert s.results.awaits.key[3] == 30.0 and s.late.asked.key[3] == 30.0
+        await until(lambda: started == [20.0, 30.0])
+
+        def fails(*args):
+            raise InputError("the comparison failed as a whole")
+
+        monkeypatch.setattr(study, "run_pair", fails)
+        s.T = 40.0
+        await until(lambda: not s.running and s.T == 30.0)
+        assert s.message.text.endswith("the comparison failed as a whole") and s.results.awaits.key[3] == 30.0
+        assert s.late.asked.key[3] == 30.0, "asked again for the runs shown"
+        gate.set()
+        await until(lambda: not s.late.running and s.results.awaits is None)
+        assert started[-1] == 30.0 and s.late.kept.key[3] == 30.0
+        assert all(e.final_error is not None for e in s.results.entries) and s.results.T == 30.0
+        assert s.late._held.nbytes == study.reference_bytes(s.setups()[0], s.h, 30.0)
+        s.release()
+
+    asyncio.run(scenario())
 
 
 def test_a_late_reference_that_fails_or_is_refused_says_why_under_the_plots(monkeypatch):
@@ -893,6 +955,10 @@ def test_a_late_reference_that_fails_or_is_refused_says_why_under_the_plots(monk
     assert refused.awaits is None and all(e.final_error is None for e in refused.entries)
     assert refused.reference_failure.startswith("this reference run needs about") and "MB are free" in said(refused)
     assert s.message.level == "warning" and refused.reference_failure in s.message.text
+    monkeypatch.setattr(memory, "BUDGET", memory.MemoryBudget(cap_bytes=4 * cap))
+    s.method = "gauss4"  # the memory is free now: a refusal is not kept, it is tried again
+    settled(s)
+    assert s.results.reference_failure == "" and all(e.final_error is not None for e in s.results.entries)
 
 
 def test_a_reference_longer_than_a_late_one_is_said_to_be_left_out(monkeypatch):

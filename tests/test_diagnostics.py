@@ -15,7 +15,14 @@ from cosymp.diagnostics import (
     tangent_maps,
 )
 from cosymp.integrate import initial_states, simulate
-from cosymp.reference import SEGMENT, reference_final, reference_states, refinement, scipy_reference
+from cosymp.reference import (
+    SEGMENT,
+    reference_final,
+    reference_states,
+    refinement,
+    scipy_reference,
+    uncertainty,
+)
 from cosymp.scenes import SCENES
 
 
@@ -126,22 +133,20 @@ def test_the_reference_runs_uncertainty_at_every_step_bounds_its_error_and_ends_
 
 def test_the_reference_goes_in_segments_that_continue_one_run_and_report_their_progress():
     """reference_states runs rk8 in compiled calls of about SEGMENT steps (progress and a place to stop
-    between them): its states are one simulate call's, to the bit, and a progress callback that
-    raises stops it after that segment."""
+    between them): its states are one simulate call's and its uncertainty that call's distance from
+    one check run, to the bit, and a progress callback that raises stops it after that segment."""
     s = setup("kapitza", "midpoint")
-    h, T = 0.01, 50.0  # k = 6: 10923 steps of h a segment, five segments
-    k = refinement(s, h)
-    seen = []
-    ref = reference_states(s, h, T, progress=lambda done, total: seen.append((done, total)))
-    whole = simulate(setup("kapitza", "rk8"), h / k, T, stride=k)
-    assert np.array_equal(ref.states, whole.z[:, 0]) and len(seen) == -(-5000 // (SEGMENT // k)) == 1
-    h, T = 0.00125, 50.0  # k = 2: 32768 steps of h a segment, two segments
-    steps = 40_000
-    seen.clear()
-    ref = reference_states(s, h, T, progress=lambda done, total: seen.append((done, total)))
-    whole = simulate(setup("kapitza", "rk8"), h / 2, T, stride=2)
-    assert refinement(s, h) == 2 and np.array_equal(ref.states, whole.z[:, 0]) and np.isfinite(ref.spread).all()
-    assert seen == [(SEGMENT // 2, steps), (steps, steps)]
+    fine = setup("kapitza", "rk8")
+    for h, T, k, ends in ((0.01, 250.0, 6, [10922, 21844, 25000]),  # steps not a multiple of a segment's
+                          (0.00125, 50.0, 2, [32768, 40000])):
+        seen = []
+        ref = reference_states(s, h, T, progress=lambda done, total, seen=seen: seen.append((done, total)))
+        whole, check = simulate(fine, h / k, T, stride=k), simulate(fine, 2 * h / k, T, stride=k // 2)
+        steps = ends[-1]
+        assert refinement(s, h) == k and SEGMENT // k == ends[0] and seen == [(e, steps) for e in ends]
+        assert np.array_equal(ref.states, whole.z[:, 0])
+        assert np.array_equal(ref.spread, uncertainty(whole.z[:, 0], check.z[:, 0], k * np.arange(steps + 1)))
+        assert ref.spread[0] == 0.0 and np.all(ref.spread[1:] > 0)
 
     class Stop(Exception):
         pass
@@ -150,9 +155,9 @@ def test_the_reference_goes_in_segments_that_continue_one_run_and_report_their_p
         seen.append(done)
         raise Stop
 
-    seen.clear()
+    seen = []
     with pytest.raises(Stop):
-        reference_states(s, h, T, progress=stop)
+        reference_states(s, 0.00125, 50.0, progress=stop)
     assert seen == [SEGMENT // 2]
 
 
