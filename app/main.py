@@ -25,11 +25,14 @@ from .memory import Collector, log_when_freed, map_large_blocks
 from .page import LOG, SCRIPTS, SPARE_READY, SPARE_SAID, Activity, Design, Spares, adjust_panel, serve_locally
 from .plotting import katex_fonts_css, push, rule
 from .presets import URL_NAMES, parse_items, query_items
-from .study import Controls, PresetLinks, SceneInfo, Study, report_filename, study_report
+from .study import Controls, PresetLinks, SceneInfo, Study, report_filename, study_report, waiting_text
 from .warmup import prepare
 
 ASSETS = Path(__file__).resolve().parent.parent / "assets"
 NOTIFY_MS = {"error": 8000, "warning": 6000, "info": 4000}
+# A comparison still running this long after it started says so in a notice (waiting_text) that stays
+# until it ends: kapitza to T = 5000 took 21 s with the spinner its only sign.
+WAITING_MS = 700
 AHEAD_MS = 50  # from the page's answer (or a look at a busy server) to the next step built ahead (App._ahead)
 AHEAD_WAIT_MS = 2000  # the next step after this long if the page has not said it is idle
 # The page says it has drawn an ahead step when its main thread is next idle (after the step's
@@ -105,6 +108,8 @@ class App(param.Parameterized):
         self.tabs.jscallback(active=TOP_JS)
         self.study.param.watch(self._on_view, "view")
         self.study.param.watch(self._on_message, "message")
+        self.study.param.watch(self._on_running, "running")
+        self._waiting = None  # the notice of a comparison that runs long
         self.study.param.watch(lambda e: self._write_url(), "results")
         for f in FEATURES:
             if f.url:
@@ -170,6 +175,21 @@ class App(param.Parameterized):
                 state.release()
         self.study.release()
         Collector.request()
+
+    def _on_running(self, event):
+        """A comparison in its thread (a quick one runs in the change's handler) that is still running
+        after WAITING_MS says what it computes in a notice, taken away when it ends."""
+        if event.new and self._served():
+            self._doc.add_timeout_callback(self._still_running, WAITING_MS)
+        elif not event.new and self._waiting is not None:
+            self._waiting.destroy()
+            self._waiting = None
+
+    def _still_running(self):
+        text = waiting_text(self.study)
+        if self.study.running and self._waiting is None and text and not self._stopped:
+            with set_curdoc(self._doc):
+                self._waiting = pn.state.notifications.info(html.escape(text), duration=0)
 
     def _on_message(self, event):
         if event.new is not None:

@@ -236,6 +236,17 @@ def measured(runs, reference, stopped=""):
     return dataclasses.replace(runs, entries=tuple(entries), reference_failure=stopped)
 
 
+def waiting_text(study):
+    """What a comparison that runs long computes, while the plots show the last results ('' for
+    inputs it will refuse). No time is guessed: this server's rate per step (SECONDS_PER_STEP), noted
+    from shorter runs, holds their fixed costs (kapitza at T = 2000 was said to take 16 s, and took 8)."""
+    try:
+        steps = check_step(study.h, study.T)
+    except InputError:
+        return ""
+    return f"Computing h = {study.h:g} to T = {study.T:g} ({steps:,} steps): the plots show the last results until then."
+
+
 def failure_note(runs):
     texts = [f"{e.label}: {e.failure}" + (f"; showing data up to t = {e.comparison.run.t[-1]:.6g}"
                                           if e.comparison is not None else "")

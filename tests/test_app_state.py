@@ -806,6 +806,10 @@ def test_a_step_longer_than_T_is_refused_and_a_run_past_T_says_where_it_ended():
     assert "Up to t = 1.2," in common.verdict(s.results)
     s = Study(scene="decaying", h=0.25, T=1.0)
     assert [c[-1] for c in list(common.numbers(s.results).values())[1:]] == ["reached T"] * 2
+    s = Study(scene="decaying", h=0.15, T=40000.0)  # 266,667 steps, to 40000.05: "ran to t = 40000" at 6 digits
+    assert s.results.entries[0].comparison.run.t[-1] == pytest.approx(40000.05, abs=1e-9)
+    assert [c[-1] for c in list(common.numbers(s.results).values())[1:]] == [
+        "ran to t = 40000.05 (T/h is not a whole number)"] * 2
 
 
 def test_a_reference_that_overflows_leaves_the_comparison_shown_without_errors():
@@ -844,8 +848,12 @@ def test_a_reference_too_long_to_go_with_its_runs_follows_them_and_measures_what
     assert all(e.final_error is None and e.comparison.error is None for e in awaiting.entries)
     assert ("the trajectory error is measured against a reference run, rk8 at h/4, 1.6e+04 steps, longer than a "
             "live view computes with its runs. It is being computed (0 % done)") in said(awaiting)
+    view = drawn(orbits.OrbitsView(s))
+    figs = shown_figures(view)
+    assert figs.error.fig.title.text == "trajectory error (computing…)" and plotted(figs.error).size == 0
     jobs.Job.request(s.late)  # computed here, to the end (no server)
     late = s.results
+    assert figs.error.fig.title.text == "trajectory error" and plotted(figs.error).size > 0, "the view follows"
     assert late.awaits is None and s.late.kept.key == a.key and s.late._held is not None
     monkeypatch.setattr(study, "LIVE_REFERENCE_STEPS", 10**9)
     live = Study(scene="kapitza").results
@@ -854,6 +862,17 @@ def test_a_reference_too_long_to_go_with_its_runs_follows_them_and_measures_what
     for a, b in zip(late.entries, live.entries):
         assert a.final_error == b.final_error and a.final_uncertainty == b.final_uncertainty
         assert np.array_equal(a.comparison.error, b.comparison.error) and a.comparison.against == "rk8 at h/4"
+
+
+def test_a_comparison_that_runs_long_says_what_it_computes():
+    """A new user's trial: kapitza to T = 5000 took 21 s, the plots showing T = 500 and a spinner the
+    only sign. The page's notice (main.App, after WAITING_MS) says what is computed."""
+    s = Study(scene="kapitza", h=0.005, T=500.0)
+    s._set({"T": 5000.0})  # the inputs of a comparison about to run (not run here)
+    assert study.waiting_text(s) == ("Computing h = 0.005 to T = 5000 (1,000,000 steps): the plots show the last "
+                                     "results until then.")
+    s._set({"h": 0.0})
+    assert study.waiting_text(s) == "", "inputs it will refuse (and say why): nothing"
 
 
 def test_a_late_reference_is_kept_for_a_change_of_method_and_let_go_with_its_inputs(monkeypatch):
@@ -968,6 +987,7 @@ def test_a_reference_longer_than_a_late_one_is_said_to_be_left_out(monkeypatch):
     s = Study(scene="kapitza")
     assert s.results.awaits is None and s.late.asked is None and s.late.kept is None
     assert "its reference would take more than 1e+03 rk8 steps here: no trajectory error plot" in said(s.results)
+    assert shown_figures(drawn(orbits.OrbitsView(s))).error.fig.title.text == "trajectory error: see below"
 
 
 @pytest.mark.parametrize("T", [8.2, 8.5])
@@ -1087,6 +1107,36 @@ def test_the_phase_note_needs_the_largest_errors_resolved_where_they_are():
     entries = (dataclasses.replace(midpoint, comparison=dataclasses.replace(c, orbit_uncertainty=blurred)),
                s.results.entries[1])
     assert "trajectory error is the larger" not in common.verdict(dataclasses.replace(s.results, entries=entries))
+
+
+def test_the_phase_note_claims_no_order_where_both_methods_have_lost_the_orbit_or_share_their_order():
+    """A new user's trial: at T = 20000 on the first view's oscillator, midpoint's largest trajectory
+    error is 2 and rk4's 0.62 of the orbit's size, and the note still explained midpoint's by its
+    order, while rk4 had spiralled inward; gauss4 against rk4 on kapitza at T = 2000 was called
+    "of order 4 against 4". Now both lost says neither follows the orbit, and equal orders claim
+    no order."""
+    s = Study(T=20000.0)
+    settled(s)
+    text = common.verdict(s.results)
+    a, b = (common.largest_error(e.comparison)[0] for e in s.results.entries)
+    assert a > b >= common.PHASE_LOST and "of order" not in text
+    assert (f"Both trajectory errors reach at least half the orbit's size (up to {a:.2g} and {b:.2g} of it): at this h "
+            "and T neither method follows the solution along its orbit") in text
+    kapitza = Study(scene="kapitza")
+    midpoint, rk4 = kapitza.results.entries
+    assert "of order 2 against 4, midpoint runs out of phase" in common.verdict(kapitza.results)
+    as_order_4 = dataclasses.replace(midpoint, method="gauss4", label="gauss4")  # its data, gauss4's order
+    text = common.verdict(dataclasses.replace(kapitza.results, entries=(as_order_4, rk4)))
+    assert "gauss4's trajectory error is the larger" in text and "of order 4 against 4" not in text
+    assert "of the same order as rk4 (4), gauss4 runs out of phase along its orbit sooner at this h" in text
+
+
+def test_a_method_that_leaves_the_band_in_the_runs_first_hundredth_leaves_it_almost_at_once():
+    """"leaves gauss4's bounded band at t ≈ 0.05" of a run to 25 (five steps) read as a moment worth
+    noting; the first view's rk4 leaves midpoint's at t ≈ 94 of 1000, said as before."""
+    early = common.verdict(Study(scene="kapitza", method="gauss4", h=0.01, T=25.0).results)
+    assert re.search(r"rk4's \|H \+ p_t\| leaves gauss4's bounded band \([0-9.]+\) almost at once \(t ≈ 0\.05\)", early)
+    assert re.search(r"leaves midpoint's bounded band \([0-9.]+\) at t ≈ 9[0-9.]+ and ends", common.verdict(Study().results))
 
 
 def test_errors_against_the_reference_at_a_stride_are_its_records_at_those_steps():

@@ -47,6 +47,10 @@ BAND_GROWTH = 2.0
 RESOLVED = 0.1  # a relative |H + p_t| from which a method no longer follows a growing solution's energy
 BIASED = 2.0  # a band within BIASED eps |H| N of N steps is their rounding, accumulated with a bias
 APART_BANDS = 2.0  # two symplectic methods' bands closer than this are about as wide
+# Trajectory errors from this fraction of the orbit's size on (a phase error of 29 degrees) no longer
+# rank two methods by their order: neither follows the solution along its orbit.
+PHASE_LOST = 0.5
+EARLY = 0.01  # a method leaving the band within this fraction of the run leaves it almost at once
 
 
 def verdict(runs):
@@ -96,7 +100,9 @@ def verdict(runs):
                 "Nothing bounds it over longer runs; whether it leaves the band there depends on the scene (the "
                 f"Long run tab measures it).{phase_note(ke, le, b.bounded)}</p>")
     end = float(np.nanmax(drift[-max(len(drift) // 10, 1):]))  # not its last value: |H + p_t| oscillates
-    return (f"<p class='verdict'>{html.escape(n)}'s |H + p_t| leaves {what} at t ≈ {lr.t[above[0]]:.3g} and ends "
+    left = float(lr.t[above[0]])  # "at t ≈ 0.05" of a run to 2000 read as a moment, where it is at once
+    when = f"at t ≈ {left:.3g}" if left > EARLY * float(lr.t[-1]) else f"almost at once (t ≈ {left:.3g})"
+    return (f"<p class='verdict'>{html.escape(n)}'s |H + p_t| leaves {what} {when} and ends "
             f"{end / b.size:.3g}× above it (its maximum over the run's last tenth, to t = {lr.t[-1]:g}): "
             + (f"{html.escape(n)}'s is the method's error, {html.escape(p)}'s its steps' rounding." if b.rounding else f"{html.escape(n)} drifts, {html.escape(p)} does not." if b.bounded else
                f"{html.escape(n)} drifts faster than {html.escape(p)}.")
@@ -111,7 +117,7 @@ def until_text(runs, entries):
     stopped = sorted((e.comparison.run.t[-1], e.label) for e in entries if e.failure)
     if not stopped:
         run = entries[0].comparison.run
-        return f"Up to T = {runs.T:g}" if reached(run, runs.T) else f"Up to t = {run.t[-1]:.6g}"
+        return f"Up to T = {runs.T:g}" if reached(run, runs.T) else f"Up to t = {past(run.t[-1], runs.T)}"
     earliest = [label for t, label in stopped if t == stopped[0][0]]
     return (f"Up to t = {stopped[0][0]:.6g}, where {html.escape(' and '.join(earliest))} stopped ("
             + "".join(f"{html.escape(label)} stopped at t = {t:.6g}; " for t, label in stopped[len(earliest):])
@@ -303,16 +309,24 @@ def phase_note(kept, lost, bounded):
     method of lower order; over the run, not at T: an error of phase comes back near 0 each time
     the phase has gone round): it says so, and, when its energy error stays in a bounded band (its
     orbit keeps its size), that what it loses is phase: structure preservation bounds the energy
-    error, not the phase along the orbit."""
+    error, not the phase along the orbit. Where both errors reach PHASE_LOST of the orbit's size,
+    it says that neither method follows the solution (an order explains nothing there), and where
+    the orders are equal, it claims none."""
     if kept.final_error is None or lost.final_error is None:  # a run stopped early, or no reference
         return ""
     (a, own_a, tells), (b, own_b, _) = (largest_error(e.comparison) for e in (kept, lost))
     if not (tells and a - own_a > b + own_b):  # larger whatever the reference's own error, and not rounding
         return ""
+    if b >= PHASE_LOST:
+        return (f" Both trajectory errors reach at least half the orbit's size (up to {a:.2g} and {b:.2g} of it): at "
+                "this h and T neither method follows the solution along its orbit, and the trajectory error no "
+                "longer ranks them; the energy error still does.")
     orders = [order(e) for e in (kept, lost)]
     p = html.escape(kept.label)
+    why = (f"of the same order as {html.escape(lost.label)} ({orders[0]}), {p} " if orders[0] == orders[1] else
+           f"of order {orders[0]} against {orders[1]}, {p} ")
     return (f" {p}'s trajectory error is the larger, though (up to {a:.2g} against {b:.2g} of the orbit's size "
-            f"over the run): of order {orders[0]} against {orders[1]}, {p} "
+            f"over the run): {why}"
             + ("runs out of phase along its orbit sooner at this h. What structure preservation bounds is the energy "
                "error, not the phase." if bounded else "follows the trajectory less closely at this h."))
 
@@ -341,7 +355,17 @@ def reached(run, T):
 
 def ended(run, T):
     """Where a run that did not stop reached (`reached`)."""
-    return "reached T" if reached(run, T) else f"ran to t = {run.t[-1]:.6g} (T/h is not a whole number)"
+    return "reached T" if reached(run, T) else f"ran to t = {past(run.t[-1], T)} (T/h is not a whole number)"
+
+
+def past(t, T):
+    """t, the end of a run's last whole step past T, with the digits it takes to differ from T (h =
+    0.15 to T = 40000 ends at 40000.05, said as "ran to t = 40000")."""
+    for digits in range(6, 18):
+        text = f"{t:.{digits}g}"
+        if text != f"{T:.{digits}g}":
+            return text
+    return repr(float(t))
 
 
 TAIL = 0.02  # the last part of a run drawn bold over its whole orbit in the portraits

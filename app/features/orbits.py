@@ -44,7 +44,10 @@ from .common import (
     zcols,
 )
 
-NUMBERS_TEXT = "<h4>Numbers</h4><p class='doc'>From the full-resolution runs: maxima over every step.</p>"
+NUMBERS_TEXT = ("<h4>Numbers</h4><p class='doc'>From the full-resolution runs: maxima over every step. The times are "
+                "this comparison's: each method's run together with the 2n + 1 nearby trajectories of its volume "
+                "form, beside the other method's and the reference run on this server's cores; not what a method "
+                "costs alone, which Work–precision measures (the best of repeated runs, each alone).</p>")
 FLOOR_COLOR = "#868e96"
 APART = 1e3  # two orbits whose sizes differ by more than this are drawn in portraits of their own
 
@@ -129,6 +132,11 @@ class Figures:
         self.error.colors(names(runs))
         self.error.set(over_time(runs, lambda c: (c.run.t[1:], c.orbit_error[1:]) if c.error is not None
                                  else (None, None), logy=True))  # 0 at t = 0
+        # An empty frame says why in its title (retitled only then: a new title lays the tab out)
+        title = ("trajectory error" if any(c.error is not None for c in cs.values()) else
+                 "trajectory error (computing…)" if runs.awaits is not None else "trajectory error: see below")
+        if self.error.fig.title.text != title:
+            self.error.fig.title.text = title
         x, y = peaks(own.t, own.y) if own and not own.side else (EMPTY, EMPTY)
         self.floor.data = {"x": x, "y": y}
 
