@@ -59,6 +59,18 @@ def forget_remembered_results():
         jobs.REMEMBERED.clear()
 
 
+@pytest.fixture(autouse=True)
+def own_memory_budget(monkeypatch):
+    """Each test leases from a budget of its own (the server's cap): the studies a test makes hold
+    their results' leases, as a page's do until it closes, and a test's studies are never closed;
+    over a worker's files they reached the 4096 MB cap, and a later test's comparison was refused."""
+    import sys
+
+    memory = sys.modules.get("app.memory")
+    if memory is not None:
+        monkeypatch.setattr(memory, "BUDGET", memory.MemoryBudget(memory.BUDGET.cap))
+
+
 @pytest.fixture
 def rng():
     return np.random.default_rng(20261121)
