@@ -512,7 +512,9 @@ WP_TEXT = ("<p>What each method costs for the accuracy it delivers, on the sideb
            "each of cosymp's methods over step sizes (refined by √2 until the error stops improving or a run "
            "reaches {steps} steps), and scipy's adaptive <code>solve_ivp</code> over tolerances 1e-3 … 1e-12 on "
            "the same extended ODE. Wall time: the best of repeated runs after an untimed warm-up (so no "
-           "compilation). Top, the relative error at T against the exact flow, or else a DOP853 run tighter than "
+           "compilation), timed in this server beside its other work (other pages, a long run): a busy server "
+           "can bend a curve back (scipy's loosest tolerances, 1.5 ms alone, read 50 ms beside a long run); "
+           "<code>cosymp workprecision</code> times in a process of its own. Top, the relative error at T against the exact flow, or else a DOP853 run tighter than "
            "any peer's; below, the largest |H~| = |H + p_t| over the run. <b>Click a point</b> of one of cosymp's "
            "methods to open that method and step in the Orbits view.</p>")
 LONG_TEXT = ("<h4>Long horizons</h4><p>Each method at one step h, carried from T = 100 to the largest horizon: the "
