@@ -130,6 +130,13 @@ class Runs:
     def ok(self):
         return [e for e in self.entries if e.comparison is not None]
 
+    def against(self, kept):
+        """These runs measured against a LateReference's Kept where they await it (and no longer
+        awaiting it), else these runs themselves."""
+        if self.awaits is None or self.awaits.key != kept.key:
+            return self
+        return dataclasses.replace(measured(self, kept.reference, kept.failure), awaits=None)
+
     @property
     def dense(self):
         """Whether a run recorded more states than a portrait draws as lines."""
@@ -434,9 +441,10 @@ class Study(Job):
     def arrived(self, kept):
         """A LateReference's Kept: the runs shown that await it are measured against it."""
         runs = self.results
-        if runs is None or runs.awaits is None or runs.awaits.key != kept.key:
+        shown = runs.against(kept) if runs is not None else None
+        if shown is runs:
             return
-        self.results = dataclasses.replace(measured(runs, kept.reference, kept.failure), awaits=None)
+        self.results = shown
         if kept.failure:
             self.say(failure_note(self.results))
 
@@ -557,27 +565,27 @@ class Study(Job):
         self.late.ask(self.results.awaits if self.results is not None else None)
 
     def _inputs(self):
+        """(scene, setups, h, T, the inputs as the study holds them, the Awaited reference or None)."""
         setups = self.setups()
         self.check_horizon()
-        return self.scene, setups, float(self.h), float(self.T), {k: getattr(self, k) for k in self.INPUTS}
+        h, T, state = float(self.h), float(self.T), {k: getattr(self, k) for k in self.INPUTS}
+        return self.scene, setups, h, T, state, awaited(setups[0], h, T, state)
 
     def _bytes(self, inputs):
         return comparison_bytes(*inputs[1:4])
 
     def _started(self, inputs):
         """The reference awaited by this comparison starts beside it (or the one under way stops)."""
-        _, setups, h, T, state = inputs
-        self.late.ask(awaited(setups[0], h, T, state))
+        self.late.ask(inputs[5])
 
     def _compute(self, inputs, run):
-        scene, setups, h, T, state = inputs
-        return run_pair(scene, setups, h, T, awaited(setups[0], h, T, state))
+        scene, setups, h, T, _, awaits = inputs
+        return run_pair(scene, setups, h, T, awaits)
 
     def _finish(self, inputs, runs):
         self._good = inputs[4]
-        kept = self.late.kept
-        if runs.awaits is not None and kept is not None and kept.key == runs.awaits.key:
-            runs = dataclasses.replace(measured(runs, kept.reference, kept.failure), awaits=None)
+        if self.late.kept is not None:
+            runs = runs.against(self.late.kept)
         self.results = runs
         note_ = failure_note(runs)
         if note_:
@@ -595,7 +603,7 @@ class Study(Job):
         was never quick again: modulated's first view (6 ms) noted 35-40 ms a time, above QUICK_S,
         and each scene change to it came in two messages 110 ms apart. A run in its own thread can
         only lower it (`note_rate`)."""
-        scene, setups, h, T, _ = inputs
+        scene, setups, h, T = inputs[:4]
         note_rate(SECONDS_PER_STEP, (scene, *(s.method.name for s in setups)), self.run, check_step(h, T))
 
 
