@@ -21,6 +21,7 @@ import panel as pn
 from bokeh.models import (
     ColumnDataSource,
     CustomJS,
+    CustomJSTicker,
     CustomJSTickFormatter,
     DataRange1d,
     Legend,
@@ -30,6 +31,7 @@ from bokeh.models import (
 from bokeh.plotting import figure as bokeh_figure
 from panel.io.document import unlocked
 
+from cosymp.report import log_axis_js
 from cosymp.report.style import pair_colors
 from cosymp.series import FLOOR, envelope, thin, zero_floor
 
@@ -91,24 +93,21 @@ return fmt(tick, step, exp);
 """
 """Compact tick labels: 4e-4, 1e5, 2500; values that differ only in late digits as offsets from the
 roundest tick (1, 1+2e-16; a long reference is written once: 2.408e-11, +1e-14). (A model belongs to one page: each axis gets its own formatter.)"""
-LOG_TICKS = r"""
-if (!(tick > 0)) return "";
-const pos = ticks.filter((v) => v > 0);
-const crowded = pos.some((v, i) => i > 0 && v / pos[i - 1] < 1.6);  // linear steps inside a decade
-const round = (v) => { const m = v / 10 ** Math.floor(Math.log10(v) + 1e-9); return [1, 2, 5, 10].some((k) => Math.abs(m - k) < 1e-6 * k); };
-if (crowded && pos.filter(round).length >= 2 ? !round(tick) : crowded && pos.indexOf(tick) % 2 === 1) return "";
-const spread = pos.length > 1 ? pos[pos.length - 1] / pos[0] - 1 : 1;  // a narrow axis needs more digits
-const digits = Math.min(15, Math.max(3, Math.ceil(-Math.log10(spread)) + 2));
-if (tick >= 1e-3 && tick < 1e5) return String(parseFloat(tick.toPrecision(digits)));
-let [m, e] = tick.toExponential(digits - 1).split("e");
-if (m.includes(".")) m = m.replace(/0+$/, "").replace(/\.$/, "");
-return m + "e" + e.replace("+", "");
-"""
-"""Log-axis tick labels: 1e-5, 2e-17, 0.01, 100; where the ticks step linearly inside a decade
-(2e-16, 3e-16, 4e-16, 5e-16 crowd together), only 1, 2 and 5 times a power of ten are labelled,
-or every other tick where that leaves fewer than two labels. An axis spanning less than a factor
-of 1.01 gets the digits that tell its ticks apart (1, 1.001, 1.002: three significant digits wrote
-1, 1, 1 on a carried loop's area ratio)."""
+@cache
+def log_axis_code(call):
+    """A Bokeh callback's code that runs the report's log-axis rule (cosymp/report/logaxis.js): its
+    functions, then `call`."""
+    return f"{log_axis_js()}\nreturn {call};"
+
+
+def log_ticker():
+    """Log-axis ticks: whole decades over 3 decades or more, 1-2-5 inside fewer, as in the report."""
+    return CustomJSTicker(major_code=log_axis_code("logTicks(cb_data.start, cb_data.end)"))
+
+
+def log_formatter():
+    """Log-axis tick labels, as in the report: 1e-5, 0.01, 100; 1, 2 and 5 where ticks crowd."""
+    return CustomJSTickFormatter(code=log_axis_code("logLabel(tick, ticks)"))
 
 
 def figure(title, x_label="t", y_label="", logx=False, logy=False, height=HEIGHT, aspect=False):
@@ -121,10 +120,10 @@ def figure(title, x_label="t", y_label="", logx=False, logy=False, height=HEIGHT
     fig.toolbar.autohide = True
     fig.title.text_font_size = "10.5pt"
     for axis, log in ((fig.xaxis, logx), (fig.yaxis, logy)):
-        axis.formatter = CustomJSTickFormatter(code=LOG_TICKS if log else TICKS)
+        axis.formatter = log_formatter() if log else CustomJSTickFormatter(code=TICKS)
         axis.axis_label_text_font_style = "normal"
-        if log:  # a log axis whose labels skip decades piled its minor ticks into black bars
-            axis.minor_tick_line_color = None
+        if log:
+            axis.ticker = log_ticker()
     fig.min_border_left = 78  # room for "1.2e-15" and the axis label when new data brings wider ticks
     fig.js_on_change("tags", CustomJS(code=RESET_RANGES))
     return fig

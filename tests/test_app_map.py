@@ -313,11 +313,11 @@ def test_the_colour_bar_uses_the_apps_compact_ticks_and_cells_have_no_gaps():
     read 1e-12; the cells' edges are drawn in their own colour (white hairlines between them)."""
     from bokeh.models import ColorBar
 
-    from app.plotting import LOG_TICKS
+    from app.plotting import log_formatter, log_ticker
 
     plot = maps.MapPlot(False, False, lambda i, j: None)
     bar = next(r for r in plot.fig.right if isinstance(r, ColorBar))
-    assert bar.formatter.code == LOG_TICKS
+    assert bar.formatter.code == log_formatter().code and bar.ticker.major_code == log_ticker().major_code
     glyph = plot.fig.renderers[0].glyph
     assert glyph.line_color == glyph.fill_color and glyph.line_color.transform is plot.mapper
 

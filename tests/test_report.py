@@ -144,18 +144,24 @@ def test_markers_are_drawn_in_a_parametric_plot(tmp_path):
     assert answers["js"] == {"a": [255, 0, 0], "b": [0, 0, 255]}
 
 
-def test_log_axes_label_whole_decades_as_the_app_does(tmp_path):
-    """0.001 to 10000 written out and 1e-4, 1e5 beyond, as the app's log ticks (app.plotting.LOG_TICKS):
-    the report wrote every decade as a power, 1e0 and 1e2 beside the app's 1 and 100."""
+def test_log_axes_tick_and_label_as_the_app_does(tmp_path):
+    """The app's log-axis rule (cosymp/report/logaxis.js): 0.001 to 10000 written out and 1e-4, 1e5
+    beyond (the report wrote every decade as a power, 1e0 and 1e2 beside the app's 1 and 100); under
+    2 decades 1, 2 and 5 times a power of ten (the report had one tick, 0.001, on an energy error
+    from 1.1e-4 to 6.5e-3; the app's ticks stopped at 0.001 too); within a decade round steps."""
     path = tmp_path / "decades.html"
     x = [0.0, 1.0, 2.0, 3.0]
     figures = [Figure("f", "t", "y", [Series("a", x, [1e-5, 1e-2, 1e1, 1e6])], logy=True),
-               Figure("g", "t", "y", [Series("a", x, [1e-2, 1e-1, 1e0, 1e4])], logy=True)]
+               Figure("g", "t", "y", [Series("a", x, [1e-2, 1e-1, 1e0, 1e4])], logy=True),
+               Figure("h", "t", "y", [Series("a", x, [1.1e-4, 1e-3, 3e-3, 6.5e-3])], logy=True),
+               Figure("i", "t", "y", [Series("a", x, [2.1e-3, 2.5e-3, 3e-3, 3.9e-3])], logy=True)]
     path.write_text(render(Report("decades", [], [Section("s", [], figures)])))
     _, errors, drawn, answers = open_offline(path, "report-decades.png", js="() => cosympPlots.map(u => u.axes[1]._values)")
-    assert errors == [] and drawn == 2
+    assert errors == [] and drawn == 4
     assert answers["js"] == [["1e-5", "0.001", "0.1", "10", "1000", "1e5"],
-                             ["0.01", "0.1", "1", "10", "100", "1000", "10000"]]
+                             ["0.01", "0.1", "1", "10", "100", "1000", "10000"],
+                             ["1e-4", "2e-4", "5e-4", "0.001", "0.002", "0.005"],
+                             ["0.0025", "0.003", "0.0035", "0.004"]]
 
 
 ORDER_JS = """() => cosympPlots.map(u => ({

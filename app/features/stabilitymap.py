@@ -14,7 +14,6 @@ from bokeh.models import (
     ColorBar,
     ColumnDataSource,
     CustomJS,
-    CustomJSTickFormatter,
     HoverTool,
     LogColorMapper,
     TapTool,
@@ -28,7 +27,7 @@ from cosymp.methods import METHODS
 from cosymp.scenes import SCENES
 
 from ..jobs import Job
-from ..plotting import FLOOR, LOG_TICKS, figure, note, pane
+from ..plotting import FLOOR, figure, log_formatter, log_ticker, note, pane
 from ..study import soft_range, theta_for
 from .base import Feature, FeatureView
 from .workprecision import run_controls
@@ -343,7 +342,7 @@ class MapPlot:
                               line_width=0.6, nonselection_fill_alpha=1.0, nonselection_line_alpha=1.0)
         # Edges in the cell's own colour: without them anti-aliasing drew white hairlines between cells.
         self.bar = ColorBar(color_mapper=self.mapper, width=12, title_standoff=6,
-                            formatter=CustomJSTickFormatter(code=LOG_TICKS))
+                            ticker=log_ticker(), formatter=log_formatter())
         self.fig.add_layout(self.bar, "right")
         self.hover = HoverTool(renderers=[quads], tooltips=tooltips("x", "y", "value"))
         self.fig.add_tools(self.hover, TapTool(renderers=[quads]))

@@ -153,6 +153,12 @@ def _asset(name):
     return resources.files(__package__).joinpath(name).read_text(encoding="utf-8")
 
 
+def log_axis_js():
+    """The JavaScript of log axes' ticks and labels (`logTicks(lo, hi)`, `logLabel(tick, ticks)`),
+    one rule for the report's axes and the app's."""
+    return _asset("logaxis.js")
+
+
 def render(report):
     """The report as one HTML document (a string)."""
     figures = []
@@ -184,7 +190,7 @@ def render(report):
             f"<script>{_asset('vendor/uPlot.iife.min.js')}</script></head><body>"
             + "".join(body)
             + f'<script id="figures" type="application/json">{data}</script>'
-            f"<script>{_asset('report.js')}</script></body></html>\n")
+            f"<script>{log_axis_js()}\n{_asset('report.js')}</script></body></html>\n")
 
 
 def write(report, path):

@@ -10,17 +10,13 @@
   }
 
   /* Log axes are drawn as log10 of the data on a linear scale (uPlot's own log scale fails on
-     ranges below about 1e-16): ticks at whole decades, readouts converted back. */
+     ranges below about 1e-16): ticks and labels as the app's (logaxis.js), readouts converted back. */
   function log10(arr) { return arr.map(function (v) { return v == null ? null : Math.log10(v); }); }
 
   function decades(u, axisIdx, min, max) {
-    var lo = Math.ceil(min), hi = Math.floor(max), step = Math.max(1, Math.ceil((hi - lo) / 8)), out = [];
-    for (var k = lo; k <= hi; k += step) out.push(k);
-    return out.length ? out : [min, max];
-  }
-
-  function decade(k) {  /* 10^k as the app writes it: 0.001 ... 10000 plainly, 1e-4 and 1e5 beyond */
-    return k >= -3 && k < 5 ? String(parseFloat(Math.pow(10, k).toPrecision(3))) : "1e" + k;
+    /* the log axis' ticks by the app's rule (logaxis.js), as log10 */
+    var ticks = logTicks(Math.pow(10, min), Math.pow(10, max)).map(Math.log10);
+    return ticks.length ? ticks : [min];
   }
 
   function steps(u, axisIdx, min, max) {
@@ -82,7 +78,9 @@
     if (log) {
       a.splits = decades;
       a.values = function (u, vals) {
-        return vals.map(function (v) { return v == null ? "" : (v === Math.round(v) ? decade(v) : fmt(Math.pow(10, v))); });
+        var ticks = vals.map(function (v) { return v == null ? null : Math.pow(10, v); });
+        var drawn = ticks.filter(function (t) { return t != null; });
+        return ticks.map(function (t) { return t == null ? "" : logLabel(t, drawn); });
       };
     } else {
       a.splits = steps;
