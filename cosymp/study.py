@@ -23,7 +23,7 @@ from .diagnostics import (
     ring_states,
     separation_omega,
 )
-from .drive import Drive
+from .drive import CHUNK, Drive
 from .errors import InputError, RunError
 from .integrate import Setup, check_step, default_stride, initial_states, simulate
 from .summary import transport
@@ -106,10 +106,7 @@ def compare(setup, h, T, delta=1e-4, cloud_points=0, cloud_radius=0.05, stride=N
     cloud = None
     area = np.empty(0)
     if cloud_points:
-        every = run.stride * max(1, run.steps // (run.stride * CLOUD_SAMPLES))
-        cloud = simulate(setup, h, T, z0=ring_states(base, cloud_radius, cloud_points), stride=every)
-        area = loop_action(cloud)
-        area = area / area[0]
+        cloud, area = carried_loop(setup, h, run.steps, loop_stride(run), base, cloud_points, cloud_radius)
     error = orbit_error = None
     if setup.scene.has_flow:
         exact = simulate(Setup.make(setup.scene, "exact", setup.values), h, run.steps * h, z0=base[None],
@@ -121,6 +118,53 @@ def compare(setup, h, T, delta=1e-4, cloud_points=0, cloud_radius=0.05, stride=N
     return Comparison(setup, run, figures[:, 0], figures[:, 1], paper_symplectic_form(run),
                       figures[:, 2], omega, cloud, area, error, Pi,
                       time.thread_time() - start, "the exact flow" if error is not None else None, orbit_error)
+
+
+def loop_stride(run):
+    """The stride at which a carried loop beside `run` is recorded: about CLOUD_SAMPLES times, a
+    multiple of the run's stride."""
+    return run.stride * max(1, run.steps // (run.stride * CLOUD_SAMPLES))
+
+
+def carried_loop(setup, h, steps, stride, base, points, radius=0.05, progress=None):
+    """The loop of `points` initial states around base (`ring_states`, of the given radius) carried
+    by setup's method over `steps` steps of h, recorded every stride-th step and at the last: (its
+    Trajectory, the area it encloses over its initial area, `loop_action`). A nonlinear scene's
+    loop goes in compiled calls of about CHUNK member steps, each followed by progress(done, steps)
+    where given: a caller stops it by raising from it (a linear one's, one matrix a step for every
+    member, in one call, with no progress). The records are one call's to the bit. A member's failure (Newton,
+    overflow) raises RunError carrying the loop up to it, as simulate's does."""
+    ring = ring_states(base, radius, points)
+    if setup.scene.kernel.linear:
+        cloud = simulate(setup, h, steps * h, z0=ring, stride=stride)
+    else:
+        drive = Drive(setup, h, z0=ring, every=0, energy=False, maps=False)
+        each = stride * max(1, CHUNK // (stride * points))
+        parts = []
+        for start in range(0, steps, each):
+            try:
+                part = drive.record(min(each, steps - start), stride)[0]
+            except RunError as err:
+                err.partial = joined(parts + [err.partial], drive.done)
+                raise
+            parts.append(part)
+            if progress is not None:
+                progress(drive.done, steps)
+        cloud = joined(parts, steps)
+    area = loop_action(cloud)
+    return cloud, area / area[0]
+
+
+def joined(parts, steps):
+    """Consecutive records of one run (each part's first record is the previous part's last) as one
+    Trajectory of `steps` steps."""
+    first = parts[0]
+    if len(parts) == 1:
+        return dataclasses.replace(first, steps=steps)
+    cut = [first] + [dataclasses.replace(p, t=p.t[1:], z=p.z[1:], pt=p.pt[1:], H=p.H[1:]) for p in parts[1:]]
+    return dataclasses.replace(first, t=np.concatenate([p.t for p in cut]), z=np.concatenate([p.z for p in cut]),
+                               pt=np.concatenate([p.pt for p in cut]), H=np.concatenate([p.H for p in cut]),
+                               steps=steps, wall_s=sum(p.wall_s for p in parts), failure=parts[-1].failure)
 
 
 def with_reference(comparison, reference, h):
