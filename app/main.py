@@ -97,7 +97,7 @@ class App(param.Parameterized):
                                                    "defaults"))
         self.views = {f.name: f.view(self.study, self.states[f.name]) for f in FEATURES}
         # Every computation of the page: the study's and the features' (a state is a Job or holds `jobs`).
-        self.jobs = [self.study, self.study.late, *(j for s in self.states.values()
+        self.jobs = [self.study, self.study.late, self.study.carry, *(j for s in self.states.values()
                                    for j in ([s] if isinstance(s, Job) else getattr(s, "jobs", ())))]
         names = [f.name for f in FEATURES]
         self.tabs = pn.Tabs(*[(f.label, pn.Column(sizing_mode="stretch_width")) for f in FEATURES],

@@ -19,6 +19,7 @@ from urllib.parse import urlencode
 import panel as pn
 import param
 
+from cosymp.diagnostics import loop_action
 from cosymp.errors import InputError, RunError
 from cosymp.integrate import Setup, check_step, default_stride
 from cosymp.methods import METHODS
@@ -27,8 +28,8 @@ from cosymp.report import render
 from cosymp.report.scene import command as report_command
 from cosymp.report.scene import scene_report
 from cosymp.scenes import SCENES, first
+from cosymp.study import CLOUD_SAMPLES, carried_loop, loop_stride, with_reference
 from cosymp.study import compare_until_failure as study_until_failure
-from cosymp.study import with_reference
 
 from .jobs import Job, Note
 from .plotting import equation, note, push
@@ -46,6 +47,10 @@ LIVE_REFERENCE_STEPS = 200_000  # a fine rk8 reference computed with its compari
 # A longer one is computed after its comparison is shown (LateReference), up to this many steps (about 15 s here).
 LATE_REFERENCE_STEPS = 20_000_000
 CLOUD_POINTS = {True: 32, False: 64}
+LOOP_RADIUS = 0.05
+# The tabs that draw the carried loop (Comparison.cloud): a comparison started while one of them is
+# shown computes its runs' loops with them; otherwise they follow the runs (LateLoops).
+LOOP_VIEWS = frozenset({"structure", "cloud", "play"})
 DELTA = 1e-4
 # A comparison peaks at 20-28 bytes per value its runs record (charged 20; 28-39 before compare ran on
 # the fused driver, which forms no array of tangent maps; tracemalloc, tests/test_app_state.py checks
@@ -53,6 +58,7 @@ DELTA = 1e-4
 BYTES_PER_RECORDED = 40
 BYTES_PER_REFERENCE_VALUE = 12  # a reference's peak (`reference_bytes`) per value it keeps,
 BYTES_PER_SEGMENT_VALUE = 64  # and per value of a segment's records
+BYTES_PER_LOOP_VALUE = 20  # carried loops' peak per value they record (tracemalloc: 11-17 on four scenes, short and long)
 
 
 def expected_quick(rate, h, T):
@@ -91,6 +97,19 @@ def comparison_bytes(setups, h, T):
     return BYTES_PER_RECORDED * total + own
 
 
+def loops_bytes(setups, h, T):
+    """Peak memory of the setups' carried loops (`carried_loops`), from the values they record:
+    each point's state, p_t and H at each record (`loop_stride` of a run with `default_stride`)."""
+    steps = check_step(h, T)
+    total = 0
+    for s in setups:
+        m = 2 * s.scene.ndof
+        stride = default_stride(steps, m + 2, m, increments=True)
+        every = stride * max(1, steps // (stride * CLOUD_SAMPLES))
+        total += (steps // every + 1) * CLOUD_POINTS[s.scene.kernel.linear] * (m + 2)
+    return BYTES_PER_LOOP_VALUE * total
+
+
 def reference_bytes(setup, h, T):
     """Peak memory of the reference of a run of setup (`cosymp.reference.reference_states`): a
     state and its uncertainty (2n + 1 values) at every step h, which it keeps, and the records of
@@ -125,6 +144,32 @@ class Runs:
     entries: tuple
     reference_failure: str = ""  # where and why the reference run stopped (run_pair)
     awaits: object = None  # the Awaited reference computed after these runs are shown (LateReference)
+    loops_pending: bool = False  # their carried loops are computed after them (LateLoops)
+    loops_failure: str = ""  # where and why a carried loop stopped before its run's end
+
+    def with_loops(self, loops):
+        """These runs with their carried loops (`carried_loops`'s result) in their comparisons."""
+        def carried(e):
+            if e.label not in loops.loops:
+                return e
+            cloud, area = loops.loops[e.label]
+            return dataclasses.replace(e, comparison=dataclasses.replace(e.comparison, cloud=cloud, cloud_area=area))
+
+        entries = tuple(carried(e) for e in self.entries)
+        return dataclasses.replace(self, entries=entries, loops_pending=False, loops_failure=loops.failure)
+
+    def same_runs(self, other):
+        """Whether these and `other` hold the same runs (measured or given their loops since)."""
+        run = lambda e: None if e.comparison is None else e.comparison.run
+        return len(self.entries) == len(other.entries) and all(run(a) is run(b) for a, b in zip(self.entries, other.entries))
+
+    def loops_added_to(self, other):
+        """Whether these runs are `other` with its carried loops added and nothing else changed."""
+        return (other is not None and other.loops_pending and not self.loops_pending
+                and len(other.entries) == len(self.entries)
+                and same_but(self, other, ("entries", "loops_pending", "loops_failure"))
+                and all(same_but(a, b, ("comparison",)) and (a.comparison is b.comparison or same_but(
+                    a.comparison, b.comparison, ("cloud", "cloud_area"))) for a, b in zip(self.entries, other.entries)))
 
     @property
     def ok(self):
@@ -149,10 +194,54 @@ def theta_for(method, theta):
     return theta if METHODS[method].takes_theta else None
 
 
+def same_but(a, b, names):
+    """Whether the dataclasses a and b hold the same objects in every field but `names`."""
+    return type(a) is type(b) and all(getattr(a, f.name) is getattr(b, f.name)
+                                      for f in dataclasses.fields(a) if f.name not in names)
+
+
 def compare_until_failure(setup, h, T):
-    """cosymp.study.compare_until_failure with this app's loop size and separation: the carried
-    loop has CLOUD_POINTS[linear] points (a linear map carries a polygon to a polygon: fewer suffice)."""
-    return study_until_failure(setup, h, T, delta=DELTA, cloud_points=CLOUD_POINTS[setup.scene.kernel.linear])
+    """cosymp.study.compare_until_failure with this app's separation, without the carried loop
+    (`carried_loops` computes it for the runs)."""
+    return study_until_failure(setup, h, T, delta=DELTA)
+
+
+class Loops(NamedTuple):
+    """The carried loops of a comparison's runs: {label: (Trajectory, area over initial area)},
+    and where and why one stopped before its run's end ('' if none did)."""
+
+    loops: dict
+    failure: str
+
+
+def carried_loops(runs, progress=None):
+    """The Loops of the runs (`cosymp.study.carried_loop`: a loop of CLOUD_POINTS[linear] states
+    around each run's start, a linear map carrying a polygon to a polygon, so fewer suffice there),
+    each method's in a thread of its own; progress(done, total) in steps over both. A loop that
+    stops (Newton, overflow) is kept up to there, and said in `failure`: its run still shows to its end."""
+    ok = [e for e in runs.entries if e.comparison is not None]
+    done = dict.fromkeys(e.label for e in ok)
+    total = sum(e.comparison.run.steps for e in ok)
+
+    def one(e):
+        c = e.comparison
+
+        def told(n, _):
+            done[e.label] = n
+            if progress is not None:
+                progress(sum(v or 0 for v in done.values()), total)
+
+        try:
+            return carried_loop(c.setup, runs.h, c.run.steps, loop_stride(c.run), c.run.z[0, 0],
+                                CLOUD_POINTS[c.setup.scene.kernel.linear], LOOP_RADIUS, told), ""
+        except RunError as err:
+            cloud = err.partial
+            area = loop_action(cloud)
+            return (cloud, area / area[0]), f"{e.label}'s carried loop: {err}; drawn up to t = {cloud.t[-1]:.6g}"
+
+    with ThreadPoolExecutor(max(1, len(ok))) as pool:
+        results = list(pool.map(one, ok))
+    return Loops({e.label: loop for e, (loop, _) in zip(ok, results)}, " | ".join(f for _, f in results if f))
 
 
 def takes_reference(setup, h, T):
@@ -208,9 +297,10 @@ def final_error(comparison, failure):
     return float(comparison.error[-1]), None if spread is None else float(spread[-1])
 
 
-def run_pair(scene, setups, h, T, awaits=None):
+def run_pair(scene, setups, h, T, awaits=None, loops=False):
     """Compare the setups and compute the reference (all at once, in threads) and return Runs; with
-    `awaits` (an Awaited), the reference is left to be computed after the runs are shown."""
+    `awaits` (an Awaited), the reference is left to be computed after the runs are shown; their
+    carried loops are computed with them where `loops` is true, else left pending (LateLoops)."""
     with ThreadPoolExecutor(len(setups) + 1) as pool:
         reference = pool.submit(live_reference, setups[0], h, T)
         done = list(pool.map(lambda s: compare_until_failure(s, h, T), setups))
@@ -227,7 +317,8 @@ def run_pair(scene, setups, h, T, awaits=None):
         if any(e.label == label for e in entries):
             label += " (2)"
         entries.append(Entry(label, s.method.name, comparison, failure))
-    return measured(Runs(scene, h, T, tuple(entries), awaits=awaits), reference, stopped)
+    runs = measured(Runs(scene, h, T, tuple(entries), awaits=awaits, loops_pending=True), reference, stopped)
+    return runs.with_loops(carried_loops(runs)) if loops else runs
 
 
 def measured(runs, reference, stopped=""):
@@ -372,6 +463,61 @@ class LateReference(Job):
         self.study.arrived(kept)
 
 
+class LateLoops(Job):
+    """The carried loops of the runs shown, computed after them (in its thread, with progress and
+    cancel) where the comparison did not compute them (no tab drawing them was shown at its start,
+    LOOP_VIEWS): the Orbits view's runs come without waiting for loops it does not draw (kapitza's
+    first view: gauss4's comparison 8 ms, its 64-point loop 47 ms more). Its memory is held while
+    they are shown."""
+
+    KIND = "carried loop"
+    WHAT = "computing the carried loops"
+    HOLD = True
+
+    def __init__(self, study, **params):
+        super().__init__(**params)
+        self.study = study
+        self.asked = None  # the Runs whose loops are computed
+        self._said = ""
+
+    def ask(self, runs):
+        """Compute the loops of `runs` if they are pending (None: none now); what is under way for
+        other runs stops, and the memory of loops no longer shown goes."""
+        if runs is not None and runs is self.asked and self.busy:
+            return
+        self.discard()
+        self.let_go()
+        self.asked = runs if runs is not None and runs.loops_pending else None
+        if self.asked is not None:
+            self.request()
+
+    def say(self, note):
+        """Kept for the runs whose loops it is about, and said under the loops' plots (`_settle`),
+        not as a notice: their tabs may not be shown."""
+        self._said = note.text
+
+    def _refused(self):
+        self._settle(self.asked)
+
+    def _failed(self, runs):
+        self._settle(runs)
+
+    def _settle(self, runs):
+        self.study.loops_arrived(runs, Loops({}, f"The carried loops were not computed: {self._said}"))
+
+    def _inputs(self):
+        return self.asked
+
+    def _bytes(self, runs):
+        return loops_bytes([e.comparison.setup for e in runs.ok], runs.h, runs.T)
+
+    def _compute(self, runs, run):
+        return carried_loops(runs, run.report)
+
+    def _finish(self, runs, loops):
+        self.study.loops_arrived(runs, loops)
+
+
 FIRST_VIEW = first_view()
 
 class Study(Job):
@@ -418,6 +564,7 @@ class Study(Job):
         self._nested = False
         self._syncing = False
         self.late = LateReference(self)
+        self.carry = LateLoops(self)
         try:
             self.inputs = self._make_inputs()
         except InputError as err:
@@ -437,6 +584,7 @@ class Study(Job):
     def release(self):
         super().release()
         self.late.release()
+        self.carry.release()
 
     def arrived(self, kept):
         """A LateReference's Kept: the runs shown that await it are measured against it."""
@@ -447,6 +595,13 @@ class Study(Job):
         self.results = shown
         if kept.failure:
             self.say(failure_note(self.results))
+
+    def loops_arrived(self, runs, loops):
+        """A LateLoops' result for `runs`: added to the runs shown if they are those runs (a late
+        reference may have measured them meanwhile)."""
+        shown = self.results
+        if shown is not None and shown.loops_pending and shown.same_runs(runs):
+            self.results = shown.with_loops(loops)
 
     def say(self, note):
         """Post a message (a repeated message is posted again)."""
@@ -561,26 +716,30 @@ class Study(Job):
         the previous beta)."""
         if {k: getattr(self, k) for k in self.INPUTS} == inputs[4]:
             self._restore()
-        # Its start stopped the reference the runs shown await: asked for again.
+        # Its start stopped the reference the runs shown await, and their loops: asked for again.
         self.late.ask(self.results.awaits if self.results is not None else None)
+        self.carry.ask(self.results)
 
     def _inputs(self):
-        """(scene, setups, h, T, the inputs as the study holds them, the Awaited reference or None)."""
+        """(scene, setups, h, T, the inputs as the study holds them, the Awaited reference or None,
+        whether its runs' loops are computed with them: a tab drawing them is shown)."""
         setups = self.setups()
         self.check_horizon()
         h, T, state = float(self.h), float(self.T), {k: getattr(self, k) for k in self.INPUTS}
-        return self.scene, setups, h, T, state, awaited(setups[0], h, T, state)
+        return self.scene, setups, h, T, state, awaited(setups[0], h, T, state), self.view in LOOP_VIEWS
 
     def _bytes(self, inputs):
-        return comparison_bytes(*inputs[1:4])
+        return comparison_bytes(*inputs[1:4]) + (loops_bytes(*inputs[1:4]) if inputs[6] else 0)
 
     def _started(self, inputs):
-        """The reference awaited by this comparison starts beside it (or the one under way stops)."""
+        """The reference awaited by this comparison starts beside it (or the one under way stops);
+        the loops of the runs shown stop."""
         self.late.ask(inputs[5])
+        self.carry.ask(None)
 
     def _compute(self, inputs, run):
-        scene, setups, h, T, _, awaits = inputs
-        return run_pair(scene, setups, h, T, awaits)
+        scene, setups, h, T, _, awaits, loops = inputs
+        return run_pair(scene, setups, h, T, awaits, loops)
 
     def _finish(self, inputs, runs):
         self._good = inputs[4]
@@ -590,6 +749,7 @@ class Study(Job):
         note_ = failure_note(runs)
         if note_:
             self.say(note_)
+        self.carry.ask(runs)
 
     def quick(self):
         """Whether the last comparison of this scene and pair of methods in this server, scaled to this

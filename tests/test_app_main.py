@@ -562,7 +562,8 @@ def test_a_spare_builds_its_tabs_layouts_while_it_waits_and_its_page_only_has_th
         app._layouts_ahead()
         assert page.SPARE_READY % "spare-id" in caplog.text and len(scheduled) == len(ahead) + 5
         assert app._remembering == [] and computed._closed and computed.study._closed, "released when done"
-        assert memory.BUDGET.used == held + app.study._held.nbytes, "no lease held but the page's own comparison's"
+        own = app.study._held.nbytes + (app.study.carry._held.nbytes if app.study.carry._held else 0)
+        assert memory.BUDGET.used == held + own, "no lease held but the page's own comparison's and its loops'"
     assert doc.roots == [] and len(doc.models) == 0, "the spare's document is not touched"
     other = main.App()
     other.study.view = "long"

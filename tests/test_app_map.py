@@ -288,12 +288,13 @@ def test_the_lease_bounds_the_measured_peak_and_is_given_back(monkeypatch):
     """The charged particle at small steps (runs of many chunks, 4 x 4 maps): the lease is at
     least tracemalloc's peak (numpy's arrays included) and at most 2 MB above it (the fused
     driver keeps nothing per step, so a lease sized by the steps would hold back other runs for
-    nothing); it is returned when the map is done (the study keeps its own comparison's lease)."""
+    nothing); it is returned when the map is done (the study keeps its own comparison's lease; it
+    is opened on Structure, whose comparison computes its carried loops with it, not after it)."""
     budget = memory.MemoryBudget(cap_bytes=1 << 32)
     monkeypatch.setattr(memory, "BUDGET", budget)
     leased = []
     monkeypatch.setattr(budget, "lease", lambda n, what, lease=budget.lease: leased.append(n) or lease(n, what))
-    s = Study(scene="charged")
+    s = Study(scene="charged", view="structure")
     m = StabilityMap(s)
     m.param.update(x="h", x_start=1e-4, x_stop=2e-4, x_log=False, nx=2, y="B0", y_start=0.05, y_stop=0.1, ny=2)
     s.T = 60.0

@@ -7,7 +7,7 @@ from cosymp.report.style import pair_colors
 
 from ..plotting import SLOTS, drawable, figure, grid, note, pane, path, source
 from .base import Feature, FeatureView
-from .common import color_key, comparisons, names
+from .common import color_key, comparisons, loops_text, names
 from .structure import time_plots, update_plots
 
 CLOUD_TEXT = ("<h4>Phase-space cloud</h4><p class='doc'>A loop of initial states (radius 0.05 around the "
@@ -38,11 +38,11 @@ class Snapshots:
     def set(self, c, color):
         for line in self.lines:
             line.glyph.line_color = color
-        if c is None or c.cloud is None:
-            for s in (self.trajectory, self.first, self.later):
-                s.data = {"x": np.empty(0), "y": np.empty(0)}
+        empty = {"x": np.empty(0), "y": np.empty(0)}
+        self.trajectory.data = empty if c is None else dict(zip("xy", path(c.run.q[:, 0, 0], c.run.p[:, 0, 0])))
+        if c is None or c.cloud is None:  # none, or its loops follow (LateLoops)
+            self.first.data = self.later.data = empty
             return
-        self.trajectory.data = dict(zip("xy", path(c.run.q[:, 0, 0], c.run.p[:, 0, 0])))
         self.first.data = dict(zip("xy", closed(c.cloud.q[0, :, 0], c.cloud.p[0, :, 0])))
         K = len(c.cloud.t)
         later = [closed(c.cloud.q[k, :, 0], c.cloud.p[k, :, 0]) for k in np.linspace(0, K - 1, 5).astype(int)[1:]]
@@ -112,7 +112,7 @@ class CloudView(FeatureView):
         loops(runs, self.snapshots)
         update_plots(self.plots, runs)
         self.key.object = color_key(runs)
-        self.shape.object = shape_note(runs)
+        self.shape.object = loops_text(runs) + shape_note(runs)
 
 
 FEATURE = Feature("cloud", "Cloud", CloudView)

@@ -27,6 +27,16 @@ def names(runs):
     return tuple(e.method for e in runs.entries) if runs is not None else ("", "")
 
 
+def loops_text(runs):
+    """What the tabs drawing the carried loops say of them beside the plots: being computed (they
+    follow the runs, LateLoops), or where one stopped ('' otherwise)."""
+    if runs.loops_pending:
+        return "<p class='doc'><b>The carried loops are being computed</b>: their plots follow.</p>"
+    if runs.loops_failure:
+        return f"<p class='doc'><b>{html.escape(runs.loops_failure)}</b>.</p>"
+    return ""
+
+
 def color_key(runs, more=""):
     """Which method each curve is (colour, solid A or dashed B), what it preserves, its order; then
     `more` (HTML: another curve's key)."""

@@ -193,7 +193,7 @@ class OrbitsView(FeatureView):
         self.grids = pn.Column(sizing_mode="stretch_width", margin=0)
         self.remark = note("")
         self.table = table([""])
-        self.follow(self.study, "results")
+        self.study.param.watch(self._on_results, "results")
         self.study.late.param.watch(lambda event: self._progress(), ["progress"])
         return pn.Column(self.key, self.grids, self.remark, note(NUMBERS_TEXT), self.table,
                          sizing_mode="stretch_width")
@@ -212,6 +212,11 @@ class OrbitsView(FeatureView):
         builds nothing."""
         shapes = dict.fromkeys(shape(name, False, False) for name in SCENES)
         return super().ahead() + [partial(self.figures, key) for key in shapes]
+
+    def _on_results(self, event):
+        """Redraw, unless only the runs' carried loops came (LateLoops): nothing here draws them."""
+        if event.new is None or not event.new.loops_added_to(event.old):
+            self.changed()
 
     def _progress(self):
         """The awaited reference's progress, in the text under the plots."""

@@ -1,11 +1,12 @@
 """Structure: volume and symplectic form of both methods, the paper's estimators beside the
 rigorous checks. It shows the sidebar's comparison."""
+import numpy as np
 import pandas as pd
 import panel as pn
 
 from ..plotting import Curves, grid, note, table
 from .base import Feature, FeatureView
-from .common import color_key, comparisons, names, numbers
+from .common import color_key, comparisons, loops_text, names, numbers
 from .orbits import NUMBERS_TEXT
 
 VOLUME_TEXT = ("<h4>Volume form</h4><p class='doc'>Left, the paper's estimator as printed: the determinant "
@@ -37,7 +38,8 @@ PLOTS = {
     "symp": ("rigorous: max |M_kᵀ J M_k − J|", "|M_kᵀ J M_k − J|", True, lambda c: (c.run.t[:-1], c.symp_dev)),
     "separation": ("rigorous: ω(δ¹, δ²)/δ² of nearby runs", "ω(δ¹, δ²) / δ²", False,
                    lambda c: (c.run.t, c.separation_omega)),
-    "area": ("carried loop: area / initial area", "area / initial area", False, lambda c: (c.cloud.t, c.cloud_area)),
+    "area": ("carried loop: area / initial area", "area / initial area", False,
+             lambda c: (c.cloud.t, c.cloud_area) if c.cloud is not None else (np.empty(0), np.empty(0))),
 }
 
 
@@ -58,12 +60,13 @@ class StructureView(FeatureView):
     def layout(self):
         self.plots = time_plots([k for k in PLOTS if k != "energy"])
         self.key = note("")
+        self.loops = note("")
         self.table = table(["quantity"])
         self.follow(self.study, "results")
         return pn.Column(
             self.key, note(VOLUME_TEXT),
             grid(*[self.plots[k].panel for k in ("paper_volume", "det")]),
-            note(SYMPLECTIC_TEXT),
+            note(SYMPLECTIC_TEXT), self.loops,
             grid(*[self.plots[k].panel for k in ("paper_omega", "symp", "separation", "area")]),
             note(NUMBERS_TEXT), self.table, sizing_mode="stretch_width")
 
@@ -73,6 +76,7 @@ class StructureView(FeatureView):
             return
         update_plots(self.plots, runs)
         self.key.object = color_key(runs)
+        self.loops.object = loops_text(runs)
         self.table.object = pd.DataFrame(numbers(runs))
 
 

@@ -16,6 +16,7 @@ from ..study import (
     comparison_bytes,
     expected_quick,
     failure_note,
+    loops_bytes,
     note_rate,
     run_pair,
 )
@@ -88,12 +89,12 @@ class ThetaLesson(Follower):
         return None if (key, float(s.T), self.theta) == self._shown else inputs
 
     def _bytes(self, inputs):
-        return comparison_bytes(*inputs[1:4])
+        return comparison_bytes(*inputs[1:4]) + loops_bytes(*inputs[1:4])
 
     def _compute(self, inputs, run):
         scene, setups, h, T, key = inputs
         sweep = None if key == self._sweep_key else theta_sweep(setups, h, T)
-        return run_pair(scene, setups, h, T), sweep, key
+        return run_pair(scene, setups, h, T, loops=True), sweep, key  # the lesson draws the loops
 
     def _finish(self, inputs, result):
         runs, sweep, key = result
