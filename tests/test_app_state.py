@@ -46,6 +46,15 @@ def settled(s):
         loop.run_until_complete(asyncio.sleep(0.02))
 
 
+async def until(test):
+    """Wait, on the running loop, until test() holds (at most 10 s)."""
+    for _ in range(2000):
+        if test():
+            return
+        await asyncio.sleep(0.005)
+    raise AssertionError("timed out")
+
+
 def said(runs):
     """The Orbits view's text under its plots for these runs."""
     return orbits.remark(runs, drawn_uncertainty(common.comparisons(runs).values()))
@@ -922,13 +931,6 @@ def test_under_a_running_loop_the_runs_come_first_and_their_reference_follows_wh
 
     monkeypatch.setattr(study, "reference_states", held)
 
-    async def until(test):
-        for _ in range(2000):
-            if test():
-                return
-            await asyncio.sleep(0.005)
-        raise AssertionError("timed out")
-
     async def scenario():
         s = Study(scene="kapitza")
         assert s.results.awaits.key[3] == 20.0 and all(e.final_error is None for e in s.results.entries)
@@ -1194,13 +1196,6 @@ def test_the_carried_loops_follow_the_runs_unless_a_tab_drawing_them_is_shown(mo
         return real(runs, progress)
 
     monkeypatch.setattr(study, "carried_loops", held)
-
-    async def until(test):
-        for _ in range(2000):
-            if test():
-                return
-            await asyncio.sleep(0.005)
-        raise AssertionError("timed out")
 
     async def scenario():
         s = Study(scene="kapitza")
