@@ -101,12 +101,12 @@ def log_axis_code(call):
 
 
 def log_ticker():
-    """Log-axis ticks: whole decades over 3 decades or more, 1-2-5 inside fewer, as in the report."""
+    """Log-axis ticks: whole decades over 2 decades or more, 1-2-5 under 2, as in the report."""
     return CustomJSTicker(major_code=log_axis_code("logTicks(cb_data.start, cb_data.end)"))
 
 
 def log_formatter():
-    """Log-axis tick labels, as in the report: 1e-5, 0.01, 100; 1, 2 and 5 where ticks crowd."""
+    """Log-axis tick labels, as in the report: 1e-5, 0.01, 100, with the digits a narrow axis needs."""
     return CustomJSTickFormatter(code=log_axis_code("logLabel(tick, ticks)"))
 
 

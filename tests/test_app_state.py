@@ -17,6 +17,7 @@ from urllib.parse import parse_qsl, urlsplit
 
 import numpy as np
 import panel as pn
+import panel.io.server as panel_server
 import param
 import pytest
 
@@ -37,13 +38,15 @@ APP = pathlib.Path(__file__).resolve().parent.parent / "app"
 
 
 def settled(s):
-    """Run the loop until the study's LateReference and LateLoops are done. Without a server a
-    comparison that is not quick runs on a loop of its own, until it ends; a reference or loops it
-    asked for are tasks of that loop, which go on only while the loop runs (the loop Panel made
-    last, so call this right after the change)."""
-    loop = asyncio.get_event_loop()
+    """Run the loops of Panel's pending tasks until the study's LateReference and LateLoops are done.
+    Without a server a comparison that is not quick runs on a loop Panel makes for it, until it ends;
+    a reference or loops it asked for are tasks of that loop, which go on only while it runs (with
+    the last loop run instead, a test waited for ever where a later request had made another)."""
     while s.late.running or s.carry.running:
-        loop.run_until_complete(asyncio.sleep(0.02))
+        loops = {t.get_loop() for t in list(panel_server._tasks) if not t.done()} or {asyncio.get_event_loop()}
+        for loop in loops:
+            if not loop.is_closed():
+                loop.run_until_complete(asyncio.sleep(0.02))
 
 
 async def until(test):

@@ -4,7 +4,8 @@
 /* The major ticks in [lo, hi] of a log axis: whole decades over 2 decades or more (every k-th, at
    most 9); under 2, 1, 2 and 5 times a power of ten (Bokeh's own ticker stepped linearly there, so
    1.1e-4 to 6.5e-3 had ticks at 0.001 ... 0.006 only, its lower decade none), or round linear steps
-   where fewer than three of those fall inside (within a decade). */
+   where fewer than three of those fall inside (within a decade: at most six ticks; an axis narrower
+   than about 1e-13 of its values, the Theta lesson's area ratio at 1 ± 1e-14, gets its two ends). */
 function logTicks(lo, hi) {
   var a = Math.min(lo, hi), b = Math.max(lo, hi), out = [], k, i;
   if (!(a > 0) || !(b > a) || !isFinite(b)) return out;
@@ -21,10 +22,15 @@ function logTicks(lo, hi) {
     });
   }
   if (out.length >= 3) return out;
-  var raw = (b - a) / 5, mag = Math.pow(10, Math.floor(Math.log10(raw))), step = 10 * mag;
+  var raw = (b - a) / 5;
+  if (!(raw > 0) || !isFinite(raw) || a / raw > 1e13) return [a, b];  // within a few ulps' steps: its ends
+  var mag = Math.pow(10, Math.floor(Math.log10(raw))), step = 10 * mag;
   [1, 2, 5].forEach(function (m) { if (m * mag >= raw && m * mag < step) step = m * mag; });
   out = [];
-  for (i = Math.ceil(a / step); i * step <= b * (1 + tol); i++) out.push(parseFloat((i * step).toPrecision(12)));
+  for (i = Math.ceil(a / step - tol); i * step <= b + tol * step; i++) {
+    var v = parseFloat((i * step).toPrecision(15));
+    if (v !== out[out.length - 1]) out.push(v);
+  }
   return out;
 }
 
