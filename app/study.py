@@ -42,7 +42,7 @@ LIVE_MAX_STEPS = 2_000_000
 # then reach the page with the change's other effects, in one message. Charged's and kapitza's first
 # views (40-50 ms) took two at 0.03, the page laid out and painted between them.
 QUICK_S = 0.06
-SECONDS_PER_STEP = {}  # (scene, method, other) -> what its last comparison in this server took per step
+SECONDS_PER_STEP = {}  # (scene, method, other, loops) -> what its last comparison in this server took per step
 LIVE_REFERENCE_STEPS = 200_000  # a fine rk8 reference computed with its comparison takes at most this many steps (~0.15 s)
 # A longer one is computed after its comparison is shown (LateReference), up to this many steps (about 15 s here).
 LATE_REFERENCE_STEPS = 20_000_000
@@ -163,10 +163,9 @@ class Runs:
         run = lambda e: None if e.comparison is None else e.comparison.run
         return len(self.entries) == len(other.entries) and all(run(a) is run(b) for a, b in zip(self.entries, other.entries))
 
-    def loops_added_to(self, other):
-        """Whether these runs are `other` with its carried loops added and nothing else changed."""
-        return (other is not None and other.loops_pending and not self.loops_pending
-                and len(other.entries) == len(self.entries)
+    def only_loops_differ(self, other):
+        """Whether these runs are `other` but for their carried loops (added, or asked for again)."""
+        return (other is not None and len(other.entries) == len(self.entries)
                 and same_but(self, other, ("entries", "loops_pending", "loops_failure"))
                 and all(same_but(a, b, ("comparison",)) and (a.comparison is b.comparison or same_but(
                     a.comparison, b.comparison, ("cloud", "cloud_area"))) for a, b in zip(self.entries, other.entries)))
@@ -478,6 +477,7 @@ class LateLoops(Job):
         super().__init__(**params)
         self.study = study
         self.asked = None  # the Runs whose loops are computed
+        self.missed = None  # the Runs whose loops were refused memory or failed as a whole (`_settle`)
         self._said = ""
 
     def ask(self, runs):
@@ -487,6 +487,7 @@ class LateLoops(Job):
             return
         self.discard()
         self.let_go()
+        self.missed = None
         self.asked = runs if runs is not None and runs.loops_pending else None
         if self.asked is not None:
             self.request()
@@ -503,6 +504,9 @@ class LateLoops(Job):
         self._settle(runs)
 
     def _settle(self, runs):
+        """The runs are shown without loops, saying why; a tab drawing them asks again when it is
+        shown (Study._on_view): the memory may be free by then."""
+        self.missed = runs
         self.study.loops_arrived(runs, Loops({}, f"The carried loops were not computed: {self._said}"))
 
     def _inputs(self):
@@ -573,6 +577,7 @@ class Study(Job):
             self.inputs = self._make_inputs()
         self._good = None
         self.param.watch(self._on_change, list(self.INPUTS))
+        self.param.watch(self._on_view, "view")
         self.refresh()
         if self.results is None:  # refused (a link's h or T, say): the scene's own run instead
             h, T, values = (scene.h, scene.T, {}) if chosen else (FIRST_VIEW["h"], FIRST_VIEW["T"], FIRST_VIEW["values"])
@@ -602,6 +607,15 @@ class Study(Job):
         shown = self.results
         if shown is not None and shown.loops_pending and shown.same_runs(runs):
             self.results = shown.with_loops(loops)
+
+    def _on_view(self, event):
+        """A tab drawing the carried loops asks again for those of the runs shown that were refused
+        memory or failed as a whole (LateLoops.missed), unless a comparison is under way."""
+        runs, missed = self.results, self.carry.missed
+        if (event.new in LOOP_VIEWS and runs is not None and missed is not None and not self.running
+                and not runs.loops_pending and runs.same_runs(missed)):
+            self.results = dataclasses.replace(runs, loops_pending=True, loops_failure="")
+            self.carry.ask(self.results)
 
     def say(self, note):
         """Post a message (a repeated message is posted again)."""
@@ -716,9 +730,12 @@ class Study(Job):
         the previous beta)."""
         if {k: getattr(self, k) for k in self.INPUTS} == inputs[4]:
             self._restore()
-        # Its start stopped the reference the runs shown await, and their loops: asked for again.
-        self.late.ask(self.results.awaits if self.results is not None else None)
-        self.carry.ask(self.results)
+        # Its start stopped the reference the runs shown await, and their pending loops: asked for again
+        # (loops computed stay, with their memory).
+        runs = self.results
+        self.late.ask(runs.awaits if runs is not None else None)
+        if runs is not None and runs.loops_pending:
+            self.carry.ask(runs)
 
     def _inputs(self):
         """(scene, setups, h, T, the inputs as the study holds them, the Awaited reference or None,
@@ -733,9 +750,10 @@ class Study(Job):
 
     def _started(self, inputs):
         """The reference awaited by this comparison starts beside it (or the one under way stops);
-        the loops of the runs shown stop."""
+        the loops being computed for the runs shown stop (those computed hold their memory while
+        shown: until this comparison's runs replace them, `_finish`)."""
         self.late.ask(inputs[5])
-        self.carry.ask(None)
+        self.carry.discard()
 
     def _compute(self, inputs, run):
         scene, setups, h, T, _, awaits, loops = inputs
@@ -752,9 +770,11 @@ class Study(Job):
         self.carry.ask(runs)
 
     def quick(self):
-        """Whether the last comparison of this scene and pair of methods in this server, scaled to this
-        many steps, took at most QUICK_S (a comparison's cost per step depends on little else)."""
-        return expected_quick(SECONDS_PER_STEP.get((self.scene, self.method, self.other)), self.h, self.T)
+        """Whether the last comparison of this scene and pair of methods in this server, with or without
+        their carried loops as this one (`_inputs`), scaled to this many steps, took at most QUICK_S (a
+        comparison's cost per step depends on little else; kapitza's loops cost 6 times its runs)."""
+        key = (self.scene, self.method, self.other, self.view in LOOP_VIEWS)
+        return expected_quick(SECONDS_PER_STEP.get(key), self.h, self.T)
 
     def _done_in(self, inputs, elapsed):
         """A live comparison keeps no status line; its cost per step is noted (`quick`): the time the
@@ -764,7 +784,7 @@ class Study(Job):
         and each scene change to it came in two messages 110 ms apart. A run in its own thread can
         only lower it (`note_rate`)."""
         scene, setups, h, T = inputs[:4]
-        note_rate(SECONDS_PER_STEP, (scene, *(s.method.name for s in setups)), self.run, check_step(h, T))
+        note_rate(SECONDS_PER_STEP, (scene, *(s.method.name for s in setups), inputs[6]), self.run, check_step(h, T))
 
 
 def report_filename(study):

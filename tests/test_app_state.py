@@ -22,7 +22,7 @@ import param
 import pytest
 
 from app import jobs, memory, plotting, study
-from app.features import cloud, common, gauges, longrun, orbits, structure, theta
+from app.features import cloud, common, gauges, longrun, orbits, play, structure, theta
 from app.plotting import DENSE, POINTS, Raster
 from app.presets import PRESETS, URL_NAMES, case_state, first_state, parse_items, query_items
 from app.study import QUICK_S, Study
@@ -1212,7 +1212,7 @@ def test_the_carried_loops_follow_the_runs_unless_a_tab_drawing_them_is_shown(mo
         gate.set()
         await until(lambda: not s.results.loops_pending)
         done = s.results
-        assert done.loops_added_to(pending) and draws == [], "Orbits is not drawn again"
+        assert done.only_loops_differ(pending) and draws == [], "Orbits is not drawn again"
         for e in done.entries:
             c = e.comparison
             alone = compare(c.setup, s.h, s.T, delta=study.DELTA, cloud_points=study.CLOUD_POINTS[False])
@@ -1239,6 +1239,91 @@ def test_loops_the_memory_cap_refuses_are_said_under_their_plots_not_awaited_for
     assert runs.loops_failure.startswith("The carried loops were not computed: computing the carried loops needs about")
     assert "The carried loops were not computed" in common.loops_text(runs) and s.message is None
     assert s.carry._held is None
+
+
+def test_loops_the_memory_cap_refused_are_computed_when_a_tab_drawing_them_is_shown_with_memory_free(monkeypatch):
+    """Refused while the Orbits tab was shown, the loops are asked for again when Structure, Cloud or
+    Play is: the memory may have come free meanwhile (they were never retried)."""
+    setups = Study(scene="damped").setups()
+    cap = study.comparison_bytes(setups, 0.1, 50.0) + study.loops_bytes(setups, 0.1, 50.0) // 2
+    monkeypatch.setattr(memory, "BUDGET", memory.MemoryBudget(cap_bytes=cap))
+    s = Study(scene="damped")
+    refused = s.results
+    assert refused.loops_failure and s.carry.missed is not None
+    s.view = "gauges"
+    assert s.results is refused, "a tab not drawing them asks nothing"
+    s.view = "structure"
+    again = s.results
+    assert again.same_runs(refused) and again.loops_failure == refused.loops_failure and s.carry.missed is not None, \
+        "still no memory: refused again, said again"
+    monkeypatch.setattr(memory, "BUDGET", memory.MemoryBudget(cap_bytes=100 * cap))
+    s.view = "cloud"
+    shown = s.results
+    assert shown.same_runs(refused) and not shown.loops_pending and not shown.loops_failure
+    assert all(e.comparison.cloud is not None for e in shown.entries) and s.carry._held.nbytes > 0
+    assert s.carry.missed is None
+
+
+def test_loops_shown_keep_their_memory_while_a_comparison_computes_and_after_it_fails(monkeypatch):
+    """A new comparison stops the loops being computed, not the lease of those still shown: they stay
+    on the page until its runs replace them, and for good where it fails as a whole (their lease was
+    let go at its start, and the loops stayed drawn)."""
+    gate = threading.Event()
+
+    def failing(*args):
+        gate.wait(30)
+        raise RuntimeError("a defect")
+
+    async def scenario():
+        s = Study(scene="kapitza")
+        await until(lambda: not s.results.loops_pending)
+        shown, lease = s.results, s.carry._held
+        assert lease.nbytes > 0
+        monkeypatch.setattr(study, "run_pair", failing)
+        monkeypatch.setattr(Study, "quick", lambda self: False)
+        s.T = 30.0
+        await until(lambda: s.run is not None and s.run.inputs[3] == 30.0)
+        assert s.results is shown and s.carry._held is lease and lease.nbytes > 0, "held while shown"
+        gate.set()
+        await until(lambda: not s.running)
+        assert s.message.text.startswith("comparison failed") and s.results is shown
+        assert s.carry._held is lease and lease.nbytes > 0 and not s.carry.running, "still shown: held, not computed again"
+        s.release()
+        assert lease.nbytes == 0
+
+    asyncio.run(scenario())
+
+
+def test_play_and_cloud_draw_a_loop_that_stopped_early_at_its_own_times():
+    """'Kapitza: Newton fails': midpoint's run reaches t = 22.5, its carried loop t = 11, T = 100. The
+    Cloud tab drew that loop at a quarter, half, three quarters and all of its own span, titled T/4 to
+    T; Play at the frame's fraction of its span (at t = 8, the loop of t = 4.5). Each is drawn at the
+    time it says, and not beyond its end."""
+    s = Study(scene="kapitza", method="midpoint", other="rk4", h=0.5, T=100.0, values={"q0": 3.0, "a": 0.3, "nu": 40.0})
+    midpoint, rk4 = (e.comparison for e in s.results.entries)
+    assert midpoint.cloud.t[-1] == pytest.approx(11.0) and midpoint.run.t[-1] == pytest.approx(22.5)
+    clouds = drawn(cloud.CloudView(s))
+    assert np.isnan(clouds.snapshots["A"].later.data["x"]).all(), "T/4 = 25 is beyond the loop's end: none drawn"
+    later = clouds.snapshots["B"].later.data["x"]
+    points = rk4.cloud.q.shape[1] + 1
+    k = [np.argmin(np.abs(rk4.cloud.t - t)) for t in (25.0, 50.0, 75.0, 100.0)]
+    assert np.array_equal(later, np.concatenate([np.append(rk4.cloud.q[i, :, 0], [rk4.cloud.q[i, 0, 0], np.nan])
+                                                 for i in k]), equal_nan=True) and len(later) == 4 * (points + 1)
+    view = play.PlayView(s, play.Playback())
+    drawn(view)
+    for frame, t in ((16, 8.0), (30, 15.0), (60, 30.0)):
+        view.state.frame = frame
+        i = np.argmin(np.abs(midpoint.cloud.t - t))
+        loop = view.loop.sources["A"].data["x"]
+        if t < 11:
+            assert np.array_equal(loop, np.append(midpoint.cloud.q[i, :, 0], midpoint.cloud.q[i, 0, 0]))
+        else:
+            assert len(loop) == 0, f"t = {t}: the loop stopped at t = 11"
+        dot = view.now.sources["A"].data["x"]
+        j = np.argmin(np.abs(midpoint.run.t - t))
+        assert np.array_equal(dot, midpoint.run.q[j:j + 1, 0, 0] if t < 22.5 else np.empty(0)), t
+        assert view.now.sources["B"].data["x"][0] == rk4.run.q[np.argmin(np.abs(rk4.run.t - t)), 0, 0]
+    assert "midpoint&#x27;s carried loop: Newton did not converge" in view.key.object
 
 
 def test_the_structure_and_cloud_views_plot_the_rigorous_checks():
@@ -1299,7 +1384,7 @@ def test_theta_lesson_is_computed_in_the_handler_where_the_last_lesson_or_compar
     steps) stands in for its cost; once computed, the lesson's own cost per step decides."""
     Study(scene="damped")  # its kernels loaded: the next comparison's cost is the computation's
     theta.LESSON_SECONDS_PER_STEP.pop("damped", None)
-    s = Study(scene="damped")
+    s = Study(scene="damped", view="cloud")  # a comparison with its loops, as the lesson's
     lesson = theta.ThetaLesson(s)
     assert lesson.quick(), "damped's 500-step comparison took well under QUICK_S"
     s.view = "theta"
@@ -1313,13 +1398,29 @@ def test_a_comparison_notes_the_time_it_took_in_its_thread_not_the_wait_for_the_
     same message) is decided by this one's cost: the time the computation took, however long the
     loop, busy with other pages, took to take its results."""
     s = Study(scene="damped")
-    key = ("damped", s.method, s.other)
+    key = ("damped", s.method, s.other, False)
     run = s._begin()
     run._main()
     time.sleep(2 * QUICK_S)  # the loop busy elsewhere
     s._end(run)
     assert study.SECONDS_PER_STEP[key] * check_step(s.h, s.T) == pytest.approx(run.computed_s)
     assert run.computed_s < QUICK_S <= time.perf_counter() - run.started and s.quick()
+
+
+def test_a_comparison_without_its_carried_loops_does_not_make_one_with_them_quick():
+    """On Orbits kapitza's runs come without their loops (LateLoops), which cost several times the
+    runs: that cost is noted apart from one with the loops (a tab drawing them shown), and does not
+    decide whether such a comparison is computed in the change's handler."""
+    s = Study(scene="kapitza")
+    without, with_ = (("kapitza", s.method, s.other, loops) for loops in (False, True))
+    assert study.SECONDS_PER_STEP[without] > 0
+    study.SECONDS_PER_STEP.pop(with_, None)
+    study.SECONDS_PER_STEP[without] = 1e-12  # however quick the runs alone were
+    s.view = "structure"
+    assert not s.quick(), "no comparison with its loops noted yet"
+    s.T = 26.0
+    assert study.SECONDS_PER_STEP[with_] > 0 and all(e.comparison.cloud is not None for e in s.results.entries)
+    assert study.SECONDS_PER_STEP[without] == 1e-12
 
 
 def test_a_comparison_in_its_own_thread_only_lowers_the_cost_noted():

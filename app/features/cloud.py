@@ -7,7 +7,7 @@ from cosymp.report.style import pair_colors
 
 from ..plotting import SLOTS, drawable, figure, grid, note, pane, path, source
 from .base import Feature, FeatureView
-from .common import color_key, comparisons, loops_text, names
+from .common import color_key, comparisons, loops_text, names, record_at
 from .structure import time_plots, update_plots
 
 CLOUD_TEXT = ("<h4>Phase-space cloud</h4><p class='doc'>A loop of initial states (radius 0.05 around the "
@@ -35,7 +35,9 @@ class Snapshots:
         self.lines = [self.fig.line("x", "y", source=self.first, line_width=2, line_alpha=0.35),
                       self.fig.line("x", "y", source=self.later, line_width=2)]
 
-    def set(self, c, color):
+    def set(self, c, color, T):
+        """Method c's trajectory and loops (its colour), these at 0, T/4, T/2, 3T/4 and T but those
+        beyond the loop's end (it stopped: `loops_text` says where)."""
         for line in self.lines:
             line.glyph.line_color = color
         empty = {"x": np.empty(0), "y": np.empty(0)}
@@ -44,8 +46,8 @@ class Snapshots:
             self.first.data = self.later.data = empty
             return
         self.first.data = dict(zip("xy", closed(c.cloud.q[0, :, 0], c.cloud.p[0, :, 0])))
-        K = len(c.cloud.t)
-        later = [closed(c.cloud.q[k, :, 0], c.cloud.p[k, :, 0]) for k in np.linspace(0, K - 1, 5).astype(int)[1:]]
+        at = [record_at(c.cloud.t, T * f) for f in (0.25, 0.5, 0.75, 1.0)]
+        later = [closed(c.cloud.q[k, :, 0], c.cloud.p[k, :, 0]) for k in at if k is not None] or [(np.empty(0),) * 2]
         gap = np.array([np.nan])
         self.later.data = {"x": np.concatenate([np.concatenate([x, gap]) for x, _ in later]),
                            "y": np.concatenate([np.concatenate([y, gap]) for _, y in later])}
@@ -90,7 +92,7 @@ def finite_part(x):
 def loops(runs, snapshots):
     cs = comparisons(runs)
     for (slot, snap), color in zip(snapshots.items(), pair_colors(*names(runs))):
-        snap.set(cs.get(slot), color)
+        snap.set(cs.get(slot), color, runs.T)
 
 
 class CloudView(FeatureView):

@@ -27,6 +27,15 @@ def names(runs):
     return tuple(e.method for e in runs.entries) if runs is not None else ("", "")
 
 
+def record_at(t, when):
+    """The index of the record of times `t` nearest `when`, or None where `when` lies beyond the last
+    (the run or its carried loop stopped before it)."""
+    if not len(t) or when > t[-1] + 1e-12 * max(abs(t[-1]), 1.0):
+        return None
+    k = int(np.searchsorted(t, when))
+    return k - 1 if k == len(t) or (k > 0 and when - t[k - 1] < t[k] - when) else k
+
+
 def loops_text(runs):
     """What the tabs drawing the carried loops say of them beside the plots: being computed (they
     follow the runs, LateLoops), or where one stopped ('' otherwise)."""

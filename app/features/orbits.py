@@ -214,8 +214,8 @@ class OrbitsView(FeatureView):
         return super().ahead() + [partial(self.figures, key) for key in shapes]
 
     def _on_results(self, event):
-        """Redraw, unless only the runs' carried loops came (LateLoops): nothing here draws them."""
-        if event.new is None or not event.new.loops_added_to(event.old):
+        """Redraw, unless only the runs' carried loops changed (LateLoops): nothing here draws them."""
+        if event.new is None or not event.new.only_loops_differ(event.old):
             self.changed()
 
     def _progress(self):

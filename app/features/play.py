@@ -12,7 +12,7 @@ import param
 from ..plotting import Pair, drawable, figure, grid, note, pane, path, push, reset_ranges, vline
 from .base import Feature, FeatureView
 from .cloud import closed
-from .common import color_key, comparisons, names, phase_axes, zcols
+from .common import color_key, comparisons, loops_text, names, phase_axes, record_at, zcols
 from .structure import time_plots, update_plots
 
 FAINT = "#dee2e6"  # the whole orbits beneath the traced part
@@ -36,11 +36,13 @@ class Playback(param.Parameterized):
         """Nothing runs in the background."""
 
 
-def traced(x, y, fraction):
-    """The part of an orbit up to `fraction` of the run (at most TRACE_POINTS points), and its end."""
-    k = int(fraction * (len(x) - 1)) if len(x) else 0
+def traced(x, y, k):
+    """The part of an orbit up to its record k (at most TRACE_POINTS points), and that record (None:
+    the whole orbit, and no record: the run stopped before now)."""
+    end = len(x) - 1 if k is None else k
     step = max(1, len(x) // TRACE_POINTS)
-    return (np.append(x[:k:step], x[k:k + 1]), np.append(y[:k:step], y[k:k + 1])), (x[k:k + 1], y[k:k + 1])
+    now = slice(0) if k is None else slice(k, k + 1)
+    return (np.append(x[:end:step], x[end:end + 1]), np.append(y[:end:step], y[end:end + 1])), (x[now], y[now])
 
 
 class PlayView(FeatureView):
@@ -105,30 +107,32 @@ class PlayView(FeatureView):
             self.orbit_fig.xaxis.axis_label, self.orbit_fig.yaxis.axis_label = xl, yl
             self._scene = runs.scene
         i, j = phase_axes(runs.scene)[0][:2]
-        self.orbits = {slot: tuple(map(drawable, zcols(c.run, i, j))) for slot, c in comparisons(runs).items()}
+        self.orbits = {slot: (c.run.t, *map(drawable, zcols(c.run, i, j))) for slot, c in comparisons(runs).items()}
         for p in (self.trace, self.now, self.loop):
             p.colors(names(runs))
-        self.faint.set({slot: path(*xy) for slot, xy in self.orbits.items()})
+        self.faint.set({slot: path(x, y) for slot, (_, x, y) in self.orbits.items()})
         update_plots(self.plots, runs)
-        self.key.object = color_key(runs)
+        self.key.object = color_key(runs) + loops_text(runs)
         self.frame()
 
     def frame(self):
+        """The frame's time, the same on both runs and loops: each drawn up to its record nearest it
+        (a run or loop that stopped before it: traced to its end, with no dot or loop now)."""
         runs = self.study.results
-        f = self.state.fraction
-        ends = {slot: traced(*xy, f) for slot, xy in self.orbits.items()}
+        cs = comparisons(runs)
+        now = max((c.run.t[-1] for c in cs.values()), default=0.0) * self.state.fraction
+        ends = {slot: traced(x, y, record_at(t, now)) for slot, (t, x, y) in self.orbits.items()}
         self.trace.set({slot: line for slot, (line, _) in ends.items()})
-        self.now.set({slot: now for slot, (_, now) in ends.items()})
+        self.now.set({slot: dot for slot, (_, dot) in ends.items()})
         loops = {}
-        for slot, c in comparisons(runs).items():
-            if c.cloud is not None:
-                k = round(f * (len(c.cloud.t) - 1))
+        for slot, c in cs.items():
+            k = None if c.cloud is None else record_at(c.cloud.t, now)
+            if k is not None:
                 loops[slot] = closed(c.cloud.q[k, :, 0], c.cloud.p[k, :, 0])
         self.loop.set(loops)
-        T = max((c.run.t[-1] for c in comparisons(runs).values()), default=0.0)
         for cursor in self.cursors:
-            cursor.location = T * f
-        self.clock.object = f"<p class='clock'>t = {T * f:.4g} of {runs.T:g}</p>"
+            cursor.location = now
+        self.clock.object = f"<p class='clock'>t = {now:.4g} of {runs.T:g}</p>"
 
 
 FEATURE = Feature("play", "Play", PlayView, lambda study: Playback())

@@ -22,7 +22,7 @@ from ..study import (
 )
 from .base import Feature, FeatureView, Follower
 from .cloud import Snapshots, loops
-from .common import color_key
+from .common import color_key, loops_text
 from .structure import time_plots, update_plots
 
 SWEEP_THETAS = np.linspace(0.0, 1.0, 21)
@@ -108,11 +108,12 @@ class ThetaLesson(Follower):
 
     def quick(self):
         """Whether the lesson is expected to take at most QUICK_S: by the last lesson of this scene in
-        this server, else by the sidebar's last comparison (two runs of the same steps, the same
-        diagnostics). A quick lesson is computed in the handler of the change that asks for it (a first
-        visit of the tab: its eight figures then come with the tab, not in a second message)."""
+        this server, else by the sidebar's last comparison with its carried loops (two runs of the same
+        steps, the same diagnostics, loops as the lesson's). A quick lesson is computed in the handler of
+        the change that asks for it (a first visit of the tab: its eight figures then come with the tab,
+        not in a second message)."""
         s = self.study
-        rate = LESSON_SECONDS_PER_STEP.get(s.scene, SECONDS_PER_STEP.get((s.scene, s.method, s.other)))
+        rate = LESSON_SECONDS_PER_STEP.get(s.scene, SECONDS_PER_STEP.get((s.scene, s.method, s.other, True)))
         return expected_quick(rate, s.h, s.T)
 
     def _done_in(self, inputs, elapsed):
@@ -165,7 +166,7 @@ class ThetaView(FeatureView):
             return
         update_plots(self.plots, runs)
         loops(runs, self.snapshots)
-        self.key.object = color_key(runs)
+        self.key.object = color_key(runs) + loops_text(runs)
 
 
 FEATURE = Feature("theta", "Theta lesson", ThetaView, ThetaLesson, url={"theta": "lesson_theta"})
