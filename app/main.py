@@ -44,6 +44,7 @@ if (sent % 2 === 1)
 """
 AHEAD_IDLE_S = 1.0  # after the last change in any page of the server
 GONE_MS = 1000  # a page whose browser has gone this long stops (App._watch)
+REPORT_POLL_S = 0.1  # how often the Download button's wait for the comparison looks and says its progress
 URL_MS = 250  # the URL follows a change of the shown state this long after (App._write_url)
 DISCARDING = set()  # the tasks discarding closed pages' sessions (App._discard)
 TOP_JS = "const main = document.getElementById('main'); if (main) main.scrollTop = 0;"  # the template's scrolled area
@@ -394,14 +395,28 @@ class App(param.Parameterized):
         if self._served():
             self._doc.add_timeout_callback(self._ahead, AHEAD_MS)
 
-    def _report(self):
-        """The report file of the current comparison; bad input becomes a message and a file saying so."""
-        self._download.filename = report_filename(self.study)
+    async def _report(self):
+        """The report file of the current comparison, once the comparison under way and the reference
+        it awaits have come: the report takes their results. It computed them again, in the server's
+        thread, where no page was answered meanwhile and the button said nothing (20 s for kapitza at
+        T = 5000, in which the page's own comparison came). Meanwhile the button says what it waits
+        for; what is left to compute (inputs the page did not compute) goes in a thread. Bad input
+        becomes a message and a file saying so."""
+        download, study = self._download, self.study
+        download.filename = report_filename(study)
+        label = download.label
         try:
-            text = study_report(self.study)
+            while not self._stopped and (study.running or study.late.running):
+                job = study if study.running else study.late
+                done = f" ({job.progress:.0%})" if job.progress > 0 else ""  # a comparison says none
+                download.label = f"Report: waiting for {job.WHAT}{done}"
+                await asyncio.sleep(REPORT_POLL_S)
+            text = await asyncio.get_running_loop().run_in_executor(None, study_report, study)
         except (InputError, RunError) as err:
             self._notify("error", f"report: {err}")
             text = f"<!DOCTYPE html><html><body><p>No report: {html.escape(str(err))}</p></body></html>"
+        finally:
+            download.label = label
         return io.BytesIO(text.encode("utf-8"))
 
     def template(self):

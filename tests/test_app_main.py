@@ -5,6 +5,7 @@ import importlib
 import inspect
 import math
 import pathlib
+import threading
 import types
 
 import panel as pn
@@ -916,3 +917,42 @@ def test_a_components_parameters_are_writable_for_a_moment_as_panel_makes_them_a
             assert after == used(page.PANEL_EDIT_READONLY, set_flagged, fail)[1]
             if not set_flagged:
                 assert after == before
+
+
+def test_the_report_waits_for_the_comparison_under_way_saying_so_and_takes_its_runs(monkeypatch):
+    """Download report while a comparison computes: the report computed it again, in the server's
+    thread (no page answered meanwhile, the button said nothing: 20 s for kapitza at T = 5000). It
+    waits for the page's own, the button saying so, and takes its runs."""
+    from app import study
+
+    gate = threading.Event()
+    real_pair, real_report = study.run_pair, study.scene_report
+    given = []
+
+    def held(*args, **kwargs):
+        gate.wait(30)
+        return real_pair(*args, **kwargs)
+
+    def report(*args, computed=None, **kwargs):
+        given.append(computed)
+        return real_report(*args, computed=computed, **kwargs)
+
+    async def scenario():
+        app = main.App()
+        app.template()
+        label = app._download.label
+        monkeypatch.setattr(study, "run_pair", held)
+        monkeypatch.setattr(study, "scene_report", report)
+        monkeypatch.setattr(study.Study, "quick", lambda self: False)
+        app.study.T = 30.0
+        task = asyncio.ensure_future(app._report())
+        await asyncio.sleep(0.3)
+        assert not task.done() and app._download.label == "Report: waiting for this comparison"
+        gate.set()
+        text = (await task).read().decode()
+        assert "--T 30 " in text and app.study.results.T == 30.0
+        assert given and given[0] is not None, "the page's runs, not computed again"
+        assert app._download.label == label
+        app._stop(None)
+
+    asyncio.run(scenario())
