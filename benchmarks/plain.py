@@ -1,6 +1,7 @@
 """cosymp's compiled loops against plain numba loops of the same method on the same scene.
 
     python benchmarks/plain.py [--steps N] [--repeats R]
+    python benchmarks/plain.py --overhead
 
 The plain loops are written per scene, in scalars, the way a user of this field writes them:
 the extended state (q, p, t, p_t), so that they do the work cosymp's step must do to give
@@ -16,6 +17,11 @@ cosymp's loops are timed against them:
 
 Both run the same steps from the same state, in one process, interleaved, best of R after a
 warm-up call; the final states (and max |H + p_t|) must agree to 1e-9.
+
+--overhead: the fixed cost of a call instead, what a run costs beyond its steps (a one-step run
+less a hundredth of the 100 steps more of a 101-step one), of `simulate` as a user calls it (its
+default stride: every step recorded, H included) and of the plain loop called through numba's
+dispatch, in blocks of CALLS calls, interleaved, best of 25 blocks.
 """
 import argparse
 import math
@@ -250,6 +256,36 @@ def best_of(calls, repeats):
     return results, best
 
 
+CALLS = 2000
+
+
+def fixed_cost(make, setup, h):
+    """Microseconds of a call of make(setup, h, n) beyond its n steps (see --overhead)."""
+    one, more = make(setup, h, 1), make(setup, h, 101)
+    for _ in range(CALLS):
+        one(), more()
+
+    def block(call):
+        start = time.perf_counter()
+        for _ in range(CALLS):
+            call()
+        return (time.perf_counter() - start) / CALLS
+
+    best = [math.inf, math.inf]
+    for _ in range(25):
+        best = [min(b, block(c)) for b, c in zip(best, (one, more))]
+    return 1e6 * (best[0] - (best[1] - best[0]) / 100)
+
+
+def overhead():
+    print(f"{'scene':<10} {'method':<9} {'simulate, fixed us':>19} {'plain call, fixed us':>21} {'ratio':>6}")
+    for scene, name in (("modulated", "rk8"), ("modulated", "midpoint"), ("kapitza", "rk4"), ("kapitza", "midpoint")):
+        setup = Setup.make(scene, name)
+        ours_us = fixed_cost(lambda s, h, n: lambda: simulate(s, h, n * h), setup, setup.scene.h)
+        plain_us = fixed_cost(lambda s, h, n: plain(s, h, n, False), setup, setup.scene.h)
+        print(f"{scene:<10} {name:<9} {ours_us:>19.2f} {plain_us:>21.2f} {ours_us / plain_us:>6.2f}")
+
+
 METHODS = ("euler", "rk4", "rk8", "midpoint", "composition4", "composition6", "leapfrog", "yoshida4",
            "yoshida6", "blanes-moan4", "blanes-moan6", "mclachlan8", "aba864")
 
@@ -258,7 +294,11 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=50_000)
     parser.add_argument("--repeats", type=int, default=15)
+    parser.add_argument("--overhead", action="store_true", help="the fixed cost of a call instead")
     args = parser.parse_args()
+    if args.overhead:
+        overhead()
+        return
     n = args.steps
     print(f"{'scene':<10} {'method':<13} {'loop':<6} {'cosymp ns/step':>15} {'plain ns/step':>14} {'ratio':>6}  agree")
     worst = (0.0, "")

@@ -28,19 +28,22 @@ def check_step(h, T):
     """Number of steps for step h up to horizon T (T/h rounded up, within 1e-9 relative, so that
     h = T/N gives N), or InputError saying what to change (h longer than T included: one step
     would end far past it)."""
-    if not (type(h) is float and type(T) is float and 0.0 < h <= T and T / h <= MAX_STEPS):
-        # Anything but simulate's common case (two floats that pass): each check with its message.
-        h, T = as_number(h, "h"), as_number(T, "T")
-        if h <= 0:
-            raise InputError(f"h = {h} must be positive: pass a step size h > 0")
-        if T <= 0:
-            raise InputError(f"T = {T} must be positive: pass a horizon T > 0")
-        if not T / h <= MAX_STEPS:  # also a ratio that overflows to inf
-            raise InputError(f"T/h = {T / h:.3g} steps exceeds the cap of {MAX_STEPS:.0e}: "
-                             f"increase h or shorten T")
-        if T / h < 1 - 1e-9:
-            raise InputError(f"h = {h:.10g} is longer than the horizon T = {T:.10g}: its one step would end at "
-                             f"t = {h:.10g}; choose h <= T or a longer T")
+    if type(h) is float and type(T) is float and 0.0 < h <= T and T / h <= MAX_STEPS:
+        # simulate's common case, two floats that pass, in a few tenths of a microsecond (T/h >= 1)
+        ratio = T / h
+        return math.ceil(ratio - 1e-9 * ratio) if ratio > 1.0 else 1
+    # Anything else: each check with its message.
+    h, T = as_number(h, "h"), as_number(T, "T")
+    if h <= 0:
+        raise InputError(f"h = {h} must be positive: pass a step size h > 0")
+    if T <= 0:
+        raise InputError(f"T = {T} must be positive: pass a horizon T > 0")
+    if not T / h <= MAX_STEPS:  # also a ratio that overflows to inf
+        raise InputError(f"T/h = {T / h:.3g} steps exceeds the cap of {MAX_STEPS:.0e}: "
+                         f"increase h or shorten T")
+    if T / h < 1 - 1e-9:
+        raise InputError(f"h = {h:.10g} is longer than the horizon T = {T:.10g}: its one step would end at "
+                         f"t = {h:.10g}; choose h <= T or a longer T")
     ratio = T / h
     return max(math.ceil(ratio - 1e-9 * max(1.0, ratio)), 1)
 
@@ -60,10 +63,14 @@ class Setup:
     # never), and the compiled loops simulate calls (kernel -> _entry's).
     scaled_beyond: float = field(init=False, repr=False, compare=False)
     loops: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+    # `start` as simulate passes it to a loop that only reads it (a writeable array types otherwise
+    # than the read-only start, and a copy a run cost 0.3 us)
+    first: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
         limit = self.scene.kernel.scaled_beyond
         self.scaled_beyond = math.inf if limit is None else limit(self.P)
+        self.first = self.start.copy()
 
     @classmethod
     def make(cls, scene, method, values=None, theta=None):
@@ -176,6 +183,9 @@ def start_pt(setup, Z, t0, pt0=None):
     return PT
 
 
+UNREAD_PT = np.zeros(1)  # p_t of one trajectory whose loop computes it (propagate_one reads it, never writes)
+
+
 @functools.cache
 def _none(N, m):
     """An empty (0, N, m) array: the increments of a run that records none."""
@@ -205,17 +215,21 @@ def simulate(setup, h, T, z0=None, stride=None, increments=False, t0=0.0, pt0=No
     MAX_RECORDED values, else the smallest stride that fits), and always the final step.
     """
     steps = check_step(h, T)
-    Z = setup.start.copy() if z0 is None else initial_states(setup, z0)
+    Z = setup.first if z0 is None else initial_states(setup, z0)
     warm.ensure(setup)
     N, m = Z.shape
-    if stride is None:
-        stride = default_stride(steps, N, m, increments)
-    elif not isinstance(stride, (int, np.integer)) or stride < 1:
-        raise InputError(f"stride = {stride} must be a positive whole number")
-    K = records(steps, stride)
-    if K * N * (m + 1) * (3 if increments else 1) > MAX_RECORDED:
-        raise InputError(f"recording {K} states of {N} trajectories exceeds the memory cap "
-                         f"({MAX_RECORDED:.0e} values): pass a larger stride")
+    per_record = N * (m + 1) * (3 if increments else 1)
+    if stride is None and (steps + 1) * per_record <= MAX_RECORDED:
+        stride, K = 1, steps + 1  # default_stride's common case: every step
+    else:
+        if stride is None:
+            stride = default_stride(steps, N, m, increments)
+        elif not isinstance(stride, (int, np.integer)) or stride < 1:
+            raise InputError(f"stride = {stride} must be a positive whole number")
+        K = records(steps, stride)
+        if K * per_record > MAX_RECORDED:
+            raise InputError(f"recording {K} states of {N} trajectories exceeds the memory cap "
+                             f"({MAX_RECORDED:.0e} values): pass a larger stride")
     if N > 1 and not setup.scene.kernel.linear:
         # An ensemble of a nonlinear scene: the fused driver's records, with no figures (the same
         # member steps as propagate_one's).
@@ -223,13 +237,19 @@ def simulate(setup, h, T, z0=None, stride=None, increments=False, t0=0.0, pt0=No
 
         return Drive(setup, h, z0=Z, pt0=pt0, t0=t0, every=0, energy=False, maps=False).record(
             steps, int(stride), increments)[0]
-    PT = np.empty(N)
-    if pt0 is not None:
-        PT[:] = pt0
+    # One trajectory's loop only reads Z and PT: the setup's start, and p_t shared where it is
+    # computed (-H); an ensemble's members are stepped in place, in arrays of their own.
+    if N == 1 and pt0 is None:
+        PT = UNREAD_PT
+    else:
+        PT = np.empty(N)
+        if pt0 is not None:
+            PT[:] = pt0
     Trec, PTrec, H, Zrec = np.empty(K), np.empty((K, N)), np.empty((K, N)), np.empty((K, N, m))
     dZrec = np.empty((K, N, m)) if increments else _none(N, m)
     t0, h = float(t0), float(h)
-    scaled = max(abs(t0), abs(t0 + steps * h)) > setup.scaled_beyond
+    end = t0 + steps * h
+    scaled = (end if t0 >= 0.0 else max(-t0, abs(end))) > setup.scaled_beyond  # |t| at most: h > 0
     # An ensemble of a linear scene steps by one matrix per step, shared by its members; a single
     # trajectory by member steps, which cost it 1.1-3.6x less than building the step's matrix (no
     # matrix products; measured on every linear scene and family) but for Gauss's, which refine

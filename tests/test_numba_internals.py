@@ -107,6 +107,37 @@ def test_simulate_calls_the_compiled_entry_point_with_the_dispatchers_result():
         propagate_one(setup.data, setup.P, 0.0, 0.01, np.repeat(Z, 2, axis=0), np.empty(2), 1, 1, *rec, False, True)
 
 
+def test_one_trajectorys_loop_only_reads_its_start_so_simulate_shares_it_between_runs_and_threads():
+    """simulate passes the setup's own start and one shared p_t to the loop of one trajectory, uncopied
+    (0.3 us and 0.26 us of a call's 4): the loop must not write them, also where a step fails, and
+    runs of the same setup at once in threads are each the run alone, to the bit."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from cosymp import integrate
+    from cosymp.errors import RunError
+
+    for scene, method, h, T, values in (("kapitza", "midpoint", 0.01, 2.0, {}), ("modulated", "rk8", 0.1, 5.0, {}),
+                                        ("kapitza", "midpoint", 0.5, 100.0, {"q0": 3.0, "a": 0.3, "nu": 40.0})):
+        setup = integrate.Setup.make(scene, method, values)
+        first, shared = setup.first.copy(), integrate.UNREAD_PT.copy()
+        try:
+            alone = integrate.simulate(setup, h, T)
+        except RunError as err:
+            alone = err.partial
+        assert np.array_equal(setup.first, first) and np.array_equal(integrate.UNREAD_PT, shared), (scene, method)
+        assert np.array_equal(alone.z[0], setup.start) and alone.pt[0, 0] == -alone.H[0, 0]
+
+        def run(_):
+            try:
+                return integrate.simulate(setup, h, T)
+            except RunError as err:
+                return err.partial
+
+        with ThreadPoolExecutor(2) as pool:
+            for r in pool.map(run, range(8)):
+                assert np.array_equal(r.z, alone.z) and np.array_equal(r.pt, alone.pt) and np.array_equal(r.H, alone.H)
+
+
 def _product_2x2(P, a, b, out):
     """A 2 x 2 matrix product written out, as a step's small matrices are: straight-line code. The
     entries are read before any is written (out might alias a or b, and LLVM then keeps the order

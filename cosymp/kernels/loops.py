@@ -271,19 +271,21 @@ def _energies(P, T, Z, out, C, zs):
 
 @njit(**INLINE)
 def _run(loop, D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, Hrec, scaled, start):
-    """A compiled loop's call: with `start`, p_t = -H(z, t0) first (START if not finite); then the
-    loop; then H of the recorded states into Hrec (where it has rows). One compiled call per run:
-    each call from Python costs microseconds."""
+    """A compiled loop's call: the start state (Z, and PT or with `start` p_t = -H(z, t0), START if
+    not finite) into the first record, where the loop takes it from; then the loop; then H of the
+    recorded states into Hrec (where it has rows). One compiled call per run: each call from Python
+    costs microseconds."""
     D, P, Z, PT, Trec, Zrec, PTrec, dZrec, Hrec = borrow((D, P, Z, PT, Trec, Zrec, PTrec, dZrec, Hrec))
     C = coef_table(D, P)
     zs = vectors(P, 1, 0.0)[0]
+    _record_start(t0, Z, PT, Trec, Zrec, PTrec, dZrec, P)
     if start:
         e, up, down = coef_at(P, t0, C)
         for i in range(Z.shape[0]):
             H0 = energy_at(P, C, Z[i], zs, e, up, down)
             if not np.isfinite(H0):
                 return START, 0
-            PT[i] = -H0
+            PTrec[0, i] = -H0
     status, k, rec = loop(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, scaled)
     if Hrec.shape[0] > 0:
         _energies(P, Trec[:rec], Zrec[:rec], Hrec[:rec], C, zs)
@@ -299,7 +301,8 @@ def _matrix_loop(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, s
     V = vectors(P, 3, 0.0)
     z, old, zs = V[0], V[1], V[2]
     reusable = _reusable(D)
-    _record_start(t0, Z, PT, Trec, Zrec, PTrec, dZrec, P)
+    for i in range(Z.shape[0]):
+        PT[i] = PTrec[0, i]
     S, Cc = PT.copy(), np.zeros_like(PT)
     rec = np.int64(1)  # int64 from the start, as the helpers' other int arguments (LITERALS)
     due = stride  # a countdown: a remainder per step, (k + 1) % stride, is an integer division
@@ -339,16 +342,15 @@ def _member_scratch(D, P):
 @njit(**INLINE)
 def _one_loop(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, scaled):
     """One member's loop: the family's step, its state, p_t and p_t's compensation kept in local
-    variables from step to step and stored into Z and PT on return (the last good state where a
-    step fails). Read back from Z every step, the state cost a cheap step 1-2 ns: the compiler
-    must assume that storing into one array changes the others."""
+    variables from step to step, from the first record (Z and PT are not written: the caller passes
+    its own start, uncopied). Read back from an array every step, the state cost a cheap step 1-2
+    ns: the compiler must assume that storing into one array changes the others."""
     C, W, z, old = _member_scratch(D, P)
     m = 2 * ndof(P)
     reusable = _reusable(D)
-    _record_start(t0, Z, PT, Trec, Zrec, PTrec, dZrec, P)
     for r in range(m):
-        z[r] = Z[0, r]
-    pt = PT[0]
+        z[r] = Zrec[0, 0, r]
+    pt = PTrec[0, 0]
     S, Cc = pt, 0.0
     rec, first = np.int64(1), np.int64(0)  # record 1, member 0: int64, not literals (LITERALS)
     due = stride
@@ -364,7 +366,6 @@ def _one_loop(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, scal
         if status == OK and not _finite(sum_, z, P):
             status = OVERFLOW
         if status != OK:
-            _store(Z, PT, first, old, pt, P)
             return status, k, rec
         S, Cc, pt = sum_, comp, sum_ - comp
         due -= 1
@@ -373,7 +374,6 @@ def _one_loop(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, scal
             Trec[rec] = t0 + (k + 1) * h
             rec += 1
             due = stride
-    _store(Z, PT, first, z, pt, P)
     return OK, nsteps, rec
 
 
@@ -395,7 +395,8 @@ def propagate_matrix(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZre
 
 @njit(**JIT)
 def propagate_one(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, Hrec, scaled, start):
-    """As propagate_matrix, for one trajectory (Z and PT have one row) of any scene: the family's
+    """As propagate_matrix, for one trajectory (Z and PT have one row) of any scene, but Z and PT are
+    only read (the states it reaches are its records, the final one among them): the family's
     member step (Newton where the method is implicit), p_t summed with compensation (`_add`). An
     ensemble of a nonlinear scene runs through the fused loop (kernels.survey), which steps its
     members the same way: a member loop here too cost 11% of each (scene, family)'s compile and
