@@ -1304,6 +1304,8 @@ def test_play_and_cloud_draw_a_loop_that_stopped_early_at_its_own_times():
     assert midpoint.cloud.t[-1] == pytest.approx(11.0) and midpoint.run.t[-1] == pytest.approx(22.5)
     clouds = drawn(cloud.CloudView(s))
     assert np.isnan(clouds.snapshots["A"].later.data["x"]).all(), "T/4 = 25 is beyond the loop's end: none drawn"
+    assert "A, midpoint: no loop at T/4, T/2, 3T/4, T, its carried loop ends at t = 11." in clouds.shape.object
+    assert "B, rk4" not in clouds.shape.object
     later = clouds.snapshots["B"].later.data["x"]
     points = rk4.cloud.q.shape[1] + 1
     k = [np.argmin(np.abs(rk4.cloud.t - t)) for t in (25.0, 50.0, 75.0, 100.0)]

@@ -1,5 +1,7 @@
 """Cloud: a loop of initial states carried by each method, and its area over time. It shows the
 sidebar's comparison."""
+import html
+
 import numpy as np
 import panel as pn
 
@@ -24,6 +26,26 @@ def closed(q, p):
     return drawable(np.append(q, q[0])), drawable(np.append(p, p[0]))
 
 
+QUARTERS = ((0.25, "T/4"), (0.5, "T/2"), (0.75, "3T/4"), (1.0, "T"))  # the later loops drawn
+
+
+def undrawn_text(runs):
+    """Which of the later loops the plots' titles name are not drawn, and why: the carried loop
+    ends before them, where its run stopped or where the loop itself did (`loops_text`)."""
+    parts = []
+    for slot, e in zip(SLOTS, runs.entries):
+        c = e.comparison
+        if c is None or c.cloud is None:
+            continue
+        missing = [label for f, label in QUARTERS if record_at(c.cloud.t, runs.T * f) is None]
+        if missing:
+            end = c.cloud.t[-1]
+            why = " (where its run stopped)" if c.run.t[-1] <= end else ""
+            parts.append(f"{slot}, {html.escape(e.label)}: no loop at {', '.join(missing)}, its carried loop ends at "
+                         f"t = {end:.6g}{why}.")
+    return f"<p class='doc'>{' '.join(parts)}</p>" if parts else ""
+
+
 class Snapshots:
     """One method's carried loop: the trajectory (grey), the loop at t = 0 (light) and at T/4, T/2,
     3T/4 and T (dark; one curve broken between loops)."""
@@ -37,7 +59,7 @@ class Snapshots:
 
     def set(self, c, color, T):
         """Method c's trajectory and loops (its colour), these at 0, T/4, T/2, 3T/4 and T but those
-        beyond the loop's end (it stopped: `loops_text` says where)."""
+        beyond the loop's end (`undrawn_text` says which)."""
         for line in self.lines:
             line.glyph.line_color = color
         empty = {"x": np.empty(0), "y": np.empty(0)}
@@ -46,7 +68,7 @@ class Snapshots:
             self.first.data = self.later.data = empty
             return
         self.first.data = dict(zip("xy", closed(c.cloud.q[0, :, 0], c.cloud.p[0, :, 0])))
-        at = [record_at(c.cloud.t, T * f) for f in (0.25, 0.5, 0.75, 1.0)]
+        at = [record_at(c.cloud.t, T * f) for f, _ in QUARTERS]
         later = [closed(c.cloud.q[k, :, 0], c.cloud.p[k, :, 0]) for k in at if k is not None] or [(np.empty(0),) * 2]
         gap = np.array([np.nan])
         self.later.data = {"x": np.concatenate([np.concatenate([x, gap]) for x, _ in later]),
@@ -114,7 +136,7 @@ class CloudView(FeatureView):
         loops(runs, self.snapshots)
         update_plots(self.plots, runs)
         self.key.object = color_key(runs)
-        self.shape.object = loops_text(runs) + shape_note(runs)
+        self.shape.object = loops_text(runs) + undrawn_text(runs) + shape_note(runs)
 
 
 FEATURE = Feature("cloud", "Cloud", CloudView)

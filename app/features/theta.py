@@ -21,7 +21,7 @@ from ..study import (
     run_pair,
 )
 from .base import Feature, FeatureView, Follower
-from .cloud import Snapshots, loops
+from .cloud import Snapshots, loops, undrawn_text
 from .common import color_key, loops_text
 from .structure import time_plots, update_plots
 
@@ -166,7 +166,7 @@ class ThetaView(FeatureView):
             return
         update_plots(self.plots, runs)
         loops(runs, self.snapshots)
-        self.key.object = color_key(runs) + loops_text(runs)
+        self.key.object = color_key(runs) + loops_text(runs) + undrawn_text(runs)
 
 
 FEATURE = Feature("theta", "Theta lesson", ThetaView, ThetaLesson, url={"theta": "lesson_theta"})
