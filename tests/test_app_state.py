@@ -1303,9 +1303,14 @@ def test_play_and_cloud_draw_a_loop_that_stopped_early_at_its_own_times():
     midpoint, rk4 = (e.comparison for e in s.results.entries)
     assert midpoint.cloud.t[-1] == pytest.approx(11.0) and midpoint.run.t[-1] == pytest.approx(22.5)
     clouds = drawn(cloud.CloudView(s))
-    assert np.isnan(clouds.snapshots["A"].later.data["x"]).all(), "T/4 = 25 is beyond the loop's end: none drawn"
-    assert "A, midpoint: no loop at T/4, T/2, 3T/4, T, its carried loop ends at t = 11." in clouds.shape.object
-    assert "B, rk4" not in clouds.shape.object
+    end = np.append(midpoint.cloud.q[-1, :, 0], [midpoint.cloud.q[-1, 0, 0], np.nan])
+    assert np.array_equal(clouds.snapshots["A"].later.data["x"], end, equal_nan=True), \
+        "T/4 = 25 is beyond the loop's end: the loop at its end alone"
+    text = clouds.shape.object
+    assert "A, midpoint: no loop at T/4, T/2, 3T/4, T, its carried loop ends at t = 11, drawn there." in text
+    assert "B, rk4" not in text
+    wide = np.ptp(rk4.cloud.q[-1, :, 0]) / np.ptp(rk4.cloud.q[0, :, 0])
+    assert f"At T, rk4's loop is {wide:.3g}× as wide" in text, "the loop that reaches T, named"
     later = clouds.snapshots["B"].later.data["x"]
     points = rk4.cloud.q.shape[1] + 1
     k = [np.argmin(np.abs(rk4.cloud.t - t)) for t in (25.0, 50.0, 75.0, 100.0)]

@@ -325,6 +325,20 @@ def test_app_report_uses_the_views_runs():
     assert "cosymp report decaying --method symplectic-euler --vs rk4" in text and 'id="figures"' in text
 
 
+def test_a_run_that_stopped_has_no_error_at_T_in_the_report_as_in_the_app():
+    """'Kapitza: Newton fails': midpoint stops at t = 22.5 of 100. The app's table shows no final
+    error; the report gave 27.3 (the error where it stopped) in the same column."""
+    from app.study import Study, study_report
+
+    study = Study(scene="kapitza", method="midpoint", other="rk4", h=0.5, T=100.0,
+                  values={"q0": 3.0, "a": 0.3, "nu": 40.0})
+    midpoint, rk4 = study.results.entries
+    assert midpoint.failure and midpoint.final_error is None and rk4.final_error is not None
+    table = study_report(study).split("<caption>Figures over every step")[1].split("</table>")[0]
+    rows = {r[0]: r for r in (re.findall(r"<td[^>]*>(.*?)</td>", row) for row in table.split("<tr>")) if r}
+    assert rows["midpoint"][4] == "–" and rows["rk4"][4] == f"{rk4.final_error:.3g}", rows
+
+
 def test_the_volume_estimator_is_named_for_the_scenes_2n_plus_1_increments():
     """The charged particle (two degrees of freedom) has five increments, not three."""
     from cosymp.report.scene import volume_name

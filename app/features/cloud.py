@@ -31,7 +31,8 @@ QUARTERS = ((0.25, "T/4"), (0.5, "T/2"), (0.75, "3T/4"), (1.0, "T"))  # the late
 
 def undrawn_text(runs):
     """Which of the later loops the plots' titles name are not drawn, and why: the carried loop
-    ends before them, where its run stopped or where the loop itself did (`loops_text`)."""
+    ends before them, where its run stopped or where the loop itself did (`loops_text`); the loop
+    at its end is drawn instead."""
     parts = []
     for slot, e in zip(SLOTS, runs.entries):
         c = e.comparison
@@ -41,8 +42,9 @@ def undrawn_text(runs):
         if missing:
             end = c.cloud.t[-1]
             why = " (where its run stopped)" if c.run.t[-1] <= end else ""
+            drawn = ", drawn there" if len(c.cloud.t) > 1 else ""
             parts.append(f"{slot}, {html.escape(e.label)}: no loop at {', '.join(missing)}, its carried loop ends at "
-                         f"t = {end:.6g}{why}.")
+                         f"t = {end:.6g}{why}{drawn}.")
     return f"<p class='doc'>{' '.join(parts)}</p>" if parts else ""
 
 
@@ -59,7 +61,7 @@ class Snapshots:
 
     def set(self, c, color, T):
         """Method c's trajectory and loops (its colour), these at 0, T/4, T/2, 3T/4 and T but those
-        beyond the loop's end (`undrawn_text` says which)."""
+        beyond the loop's end, and then the loop at its end (`undrawn_text` says so)."""
         for line in self.lines:
             line.glyph.line_color = color
         empty = {"x": np.empty(0), "y": np.empty(0)}
@@ -68,8 +70,11 @@ class Snapshots:
             self.first.data = self.later.data = empty
             return
         self.first.data = dict(zip("xy", closed(c.cloud.q[0, :, 0], c.cloud.p[0, :, 0])))
-        at = [record_at(c.cloud.t, T * f) for f, _ in QUARTERS]
-        later = [closed(c.cloud.q[k, :, 0], c.cloud.p[k, :, 0]) for k in at if k is not None] or [(np.empty(0),) * 2]
+        at = [k for k in (record_at(c.cloud.t, T * f) for f, _ in QUARTERS) if k is not None]
+        last = len(c.cloud.t) - 1
+        if last > 0 and last not in at:  # the loop ends before T: its last loop is drawn too (`undrawn_text`)
+            at.append(last)
+        later = [closed(c.cloud.q[k, :, 0], c.cloud.p[k, :, 0]) for k in at] or [(np.empty(0),) * 2]
         gap = np.array([np.nan])
         self.later.data = {"x": np.concatenate([np.concatenate([x, gap]) for x, _ in later]),
                            "y": np.concatenate([np.concatenate([y, gap]) for _, y in later])}
@@ -80,11 +85,15 @@ STRETCHED = 10.0  # a loop stretched or squeezed this much in a coordinate is a 
 
 
 def shape_note(runs):
-    """What the loops' shapes at T are, from A's (or else B's) cloud, when the plots alone mislead:
-    loops tiny against the trajectory, or stretched into needles."""
-    c = next((c for c in comparisons(runs).values() if c.cloud is not None), None)
-    if c is None:
+    """What a loop's shape at its end is, A's (or else B's) where one reaches T, when the plots alone
+    mislead: loops tiny against the trajectory, or stretched into needles. It names the method, and
+    the time where the loop ends before T."""
+    loops = [(e.label, e.comparison) for e in runs.entries if e.comparison is not None and e.comparison.cloud is not None]
+    if not loops:
         return ""
+    name, c = next(((n, c) for n, c in loops if record_at(c.cloud.t, runs.T) is not None), loops[0])
+    end = c.cloud.t[-1]
+    when = "At T," if record_at(c.cloud.t, runs.T) is not None else f"At t = {end:.6g}, where it ends,"
     q, p = c.cloud.q[:, :, 0], c.cloud.p[:, :, 0]
     width = np.ptp(q, axis=1)
     height = np.ptp(p, axis=1)
@@ -96,7 +105,8 @@ def shape_note(runs):
     parts = []
     if max(wide, 1 / wide, tall, 1 / tall) > STRETCHED:
         shape = " (stretched one way, squeezed the other: a needle)" if (wide - 1) * (tall - 1) < 0 else ""
-        parts.append(f"At T the loop is {wide:.3g}× as wide (q1) and {tall:.3g}× as tall (p1) as at t = 0{shape}.")
+        parts.append(f"{when} {html.escape(name)}'s loop is {wide:.3g}× as wide (q1) and {tall:.3g}× as tall (p1) as "
+                     f"at t = 0{shape}.")
     if max(width[-1], height[-1]) < SMALL * span:
         parts.append("The loops are small against the trajectory at this scale (zoom in with the mouse wheel "
                      "to see one).")

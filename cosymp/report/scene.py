@@ -98,7 +98,10 @@ def _numbers(s, c, failure, err):
     if c is None:
         return [s.method.label(s.theta), np.nan, np.nan, np.nan, np.nan, 0, np.nan, failure]
     n = c.summary
-    final = n["final relative error"] if n["final relative error"] is not None else (np.nan if err is None else err)
+    if failure:  # stopped before T: no error at T (the app's table shows none either; its stop is in 'stopped')
+        final = np.nan
+    else:
+        final = n["final relative error"] if n["final relative error"] is not None else (np.nan if err is None else err)
     own = unresolved(final, None if c.uncertainty is None or failure else float(c.uncertainty[-1]))
     if own:  # the reference is further off than the method: the error says nothing of the method
         final = f"{final:.3g}{own}"
