@@ -400,10 +400,11 @@ class App(param.Parameterized):
         it awaits have come: the report takes their results. It computed them again, in the server's
         thread, where no page was answered meanwhile and the button said nothing (20 s for kapitza at
         T = 5000, in which the page's own comparison came). Meanwhile the button says what it waits
-        for; what is left to compute (inputs the page did not compute) goes in a thread. Bad input
-        becomes a message and a file saying so."""
+        for; settings changed meanwhile are the report's, and a message says so. What is left to
+        compute (inputs the page did not compute) goes in a thread. Bad input becomes a message and
+        a file saying so."""
         download, study = self._download, self.study
-        download.filename = report_filename(study)
+        clicked = {k: getattr(study, k) for k in Study.INPUTS}
         label = download.label
         try:
             while not self._stopped and (study.running or study.late.running):
@@ -411,6 +412,9 @@ class App(param.Parameterized):
                 done = f" ({job.progress:.0%})" if job.progress > 0 else ""  # a comparison says none
                 download.label = f"Report: waiting for {job.WHAT}{done}"
                 await asyncio.sleep(REPORT_POLL_S)
+            download.filename = report_filename(study)
+            if {k: getattr(study, k) for k in Study.INPUTS} != clicked:
+                self._notify("info", "report: of the settings shown now, changed since Download was clicked")
             text = await asyncio.get_running_loop().run_in_executor(None, study_report, study)
         except (InputError, RunError) as err:
             self._notify("error", f"report: {err}")

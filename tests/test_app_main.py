@@ -953,6 +953,17 @@ def test_the_report_waits_for_the_comparison_under_way_saying_so_and_takes_its_r
         assert "--T 30 " in text and app.study.results.T == 30.0
         assert given and given[0] is not None, "the page's runs, not computed again"
         assert app._download.label == label
+        notes = []
+        app._notify = lambda level, text: notes.append(text)
+        gate.clear()
+        app.study.T = 35.0
+        task = asyncio.ensure_future(app._report())
+        await asyncio.sleep(0.3)
+        app.study.other = "gauss4"  # changed while it waits: the report is of what is shown, and says so
+        gate.set()
+        text = (await task).read().decode()
+        assert "--vs gauss4" in text and "--T 35 " in text
+        assert notes == ["report: of the settings shown now, changed since Download was clicked"]
         app._stop(None)
 
     asyncio.run(scenario())
