@@ -1333,6 +1333,18 @@ def test_play_and_cloud_draw_a_loop_that_stopped_early_at_its_own_times():
     assert "midpoint&#x27;s carried loop: Newton did not converge" in view.key.object
 
 
+def test_the_cloud_draws_a_coarse_orbit_as_its_points_as_orbits_does():
+    """'RK4 just past its stability limit': midpoint's orbit at h = 2.9, two points a turn, drawn as a
+    line filled a ring with its chords; as points, as Orbits draws it. A fine orbit stays a line."""
+    case = next(c for c in SCENES["modulated"].cases if c.name == "RK4 just past its stability limit")
+    s = Study(scene="modulated", method=case.method, other=case.other, h=case.h, T=case.T, values=dict(case.values))
+    clouds = drawn(cloud.CloudView(s))
+    line, dots = clouds.snapshots["A"].orbit
+    assert dots.visible and not line.visible
+    s.h = 0.01
+    assert line.visible and not dots.visible
+
+
 def test_the_structure_and_cloud_views_plot_the_rigorous_checks():
     s = Study(scene="damped")
     view = drawn(structure.StructureView(s))

@@ -7,7 +7,7 @@ import panel as pn
 
 from cosymp.report.style import pair_colors
 
-from ..plotting import SLOTS, drawable, figure, grid, note, pane, path, source
+from ..plotting import SLOTS, drawable, figure, grid, note, pane, path, scattered, source
 from .base import Feature, FeatureView
 from .common import color_key, comparisons, loops_text, names, record_at
 from .structure import time_plots, update_plots
@@ -48,6 +48,9 @@ def undrawn_text(runs):
     return f"<p class='doc'>{' '.join(parts)}</p>" if parts else ""
 
 
+GREY = "#ced4da"  # the trajectory beneath the loops
+
+
 class Snapshots:
     """One method's carried loop: the trajectory (grey), the loop at t = 0 (light) and at T/4, T/2,
     3T/4 and T (dark; one curve broken between loops)."""
@@ -55,7 +58,10 @@ class Snapshots:
     def __init__(self, title):
         self.fig = figure(title, "q1", "p1")
         self.trajectory, self.first, self.later = source(), source(), source()
-        self.fig.line("x", "y", source=self.trajectory, line_color="#ced4da", line_width=1)
+        # a coarse orbit (a few points a turn) as its points, as Orbits draws it: as a line its chords
+        # filled a ring between the radii of the points ('RK4 just past its stability limit', h = 2.9)
+        self.orbit = (self.fig.line("x", "y", source=self.trajectory, line_color=GREY, line_width=1),
+                      self.fig.scatter("x", "y", source=self.trajectory, color=GREY, size=3, visible=False))
         self.lines = [self.fig.line("x", "y", source=self.first, line_width=2, line_alpha=0.35),
                       self.fig.line("x", "y", source=self.later, line_width=2)]
 
@@ -66,6 +72,10 @@ class Snapshots:
             line.glyph.line_color = color
         empty = {"x": np.empty(0), "y": np.empty(0)}
         self.trajectory.data = empty if c is None else dict(zip("xy", path(c.run.q[:, 0, 0], c.run.p[:, 0, 0])))
+        dots = c is not None and scattered(c.run.q[:, 0, 0], c.run.p[:, 0, 0])
+        for renderer, shown in zip(self.orbit, (not dots, dots)):
+            if renderer.visible != shown:
+                renderer.visible = shown
         if c is None or c.cloud is None:  # none, or its loops follow (LateLoops)
             self.first.data = self.later.data = empty
             return
