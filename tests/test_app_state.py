@@ -1331,6 +1331,7 @@ def test_play_and_cloud_draw_a_loop_that_stopped_early_at_its_own_times():
         assert np.array_equal(dot, midpoint.run.q[j:j + 1, 0, 0] if t < 22.5 else np.empty(0)), t
         assert view.now.sources["B"].data["x"][0] == rk4.run.q[np.argmin(np.abs(rk4.run.t - t)), 0, 0]
     assert "midpoint&#x27;s carried loop: Newton did not converge" in view.key.object
+    assert "midpoint's run stopped at t = 22.5 (tangent map: Newton did not converge in step 46" in view.key.object
 
 
 def test_the_cloud_draws_a_coarse_orbit_as_its_points_as_orbits_does():

@@ -36,6 +36,14 @@ def record_at(t, when):
     return k - 1 if k == len(t) or (k > 0 and when - t[k - 1] < t[k] - when) else k
 
 
+def stops_text(runs):
+    """Where each run that stopped before T stopped, and why ('' if none did): said beside a view that
+    draws them up to a time (Play), where the notice that said it may have gone."""
+    parts = [f"{html.escape(e.label)}'s run stopped at t = {e.comparison.run.t[-1]:.6g} ({html.escape(e.failure)})."
+             for e in runs.entries if e.failure and e.comparison is not None]
+    return f"<p class='doc'>{' '.join(parts)}</p>" if parts else ""
+
+
 def loops_text(runs):
     """What the tabs drawing the carried loops say of them beside the plots: being computed (they
     follow the runs, LateLoops), or where one stopped ('' otherwise)."""

@@ -12,7 +12,7 @@ import param
 from ..plotting import Pair, drawable, figure, grid, note, pane, path, push, reset_ranges, vline
 from .base import Feature, FeatureView
 from .cloud import closed
-from .common import color_key, comparisons, loops_text, names, phase_axes, record_at, zcols
+from .common import color_key, comparisons, loops_text, names, phase_axes, record_at, stops_text, zcols
 from .structure import time_plots, update_plots
 
 FAINT = "#dee2e6"  # the whole orbits beneath the traced part
@@ -112,7 +112,7 @@ class PlayView(FeatureView):
             p.colors(names(runs))
         self.faint.set({slot: path(x, y) for slot, (_, x, y) in self.orbits.items()})
         update_plots(self.plots, runs)
-        self.key.object = color_key(runs) + loops_text(runs)
+        self.key.object = color_key(runs) + stops_text(runs) + loops_text(runs)
         self.frame()
 
     def frame(self):
