@@ -19,13 +19,14 @@ from cosymp.errors import InputError, RunError
 from cosymp.methods import METHODS
 from cosymp.scenes import SCENES
 
+from . import memory
 from .features import FEATURES
 from .jobs import FAILURES, Job, Note, failure_text
 from .memory import Collector, log_when_freed, map_large_blocks
 from .page import LOG, SCRIPTS, SPARE_READY, SPARE_SAID, Activity, Design, Spares, adjust_panel, serve_locally
 from .plotting import katex_fonts_css, push, rule
 from .presets import URL_NAMES, parse_items, query_items
-from .study import Controls, PresetLinks, SceneInfo, Study, report_filename, study_report, waiting_text
+from .study import Controls, PresetLinks, SceneInfo, Study, rendered_report, report_inputs, waiting_text
 from .warmup import prepare
 
 ASSETS = Path(__file__).resolve().parent.parent / "assets"
@@ -45,6 +46,12 @@ if (sent % 2 === 1)
 AHEAD_IDLE_S = 1.0  # after the last change in any page of the server
 GONE_MS = 1000  # a page whose browser has gone this long stops (App._watch)
 REPORT_POLL_S = 0.1  # how often the Download button's wait for the comparison looks and says its progress
+REPORT_LABEL = "Download report (HTML)"
+
+
+def no_report(why):
+    """The file a report that could not be made is: a page saying why."""
+    return f"<!DOCTYPE html><html><body><p>No report: {html.escape(str(why))}</p></body></html>"
 URL_MS = 250  # the URL follows a change of the shown state this long after (App._write_url)
 DISCARDING = set()  # the tasks discarding closed pages' sessions (App._discard)
 TOP_JS = "const main = document.getElementById('main'); if (main) main.scrollTop = 0;"  # the template's scrolled area
@@ -72,6 +79,7 @@ class App(param.Parameterized):
         map_large_blocks()
         log_when_freed(self)
         self._pending = []
+        self._reporting = None  # the report being made (_report)
         self._stopped = False
         self._doc = pn.state.curdoc
         self._location = pn.state.location
@@ -396,32 +404,46 @@ class App(param.Parameterized):
             self._doc.add_timeout_callback(self._ahead, AHEAD_MS)
 
     async def _report(self):
-        """The report file of the current comparison, once the comparison under way and the reference
-        it awaits have come: the report takes their results. It computed them again, in the server's
+        """The report file of the current comparison (`_report_text`); a click while one is being
+        made gets that one (each click ran its own wait, and the last to end put back the first's
+        'waiting' label for good)."""
+        task = self._reporting
+        if task is None:
+            task = self._reporting = asyncio.ensure_future(self._report_text())
+            task.add_done_callback(lambda _: setattr(self, "_reporting", None))
+        return io.BytesIO((await task).encode("utf-8"))
+
+    async def _report_text(self):
+        """The report of the current comparison, once the comparison under way and the reference it
+        awaits have come: the report takes their results. It computed them again, in the server's
         thread, where no page was answered meanwhile and the button said nothing (20 s for kapitza at
         T = 5000, in which the page's own comparison came). Meanwhile the button says what it waits
-        for; settings changed meanwhile are the report's, and a message says so. What is left to
-        compute (inputs the page did not compute) goes in a thread. Bad input becomes a message and
-        a file saying so."""
+        for; settings changed meanwhile are the report's, and a message says so. Its inputs are read
+        then, on the loop (`report_inputs`), and it is made in a thread, holding the memory of what
+        it computes beyond the page's runs (`ReportInputs.bytes`). Bad input, or memory refused,
+        becomes a message and a file saying so; a page closed meanwhile gets none made."""
         download, study = self._download, self.study
         clicked = {k: getattr(study, k) for k in Study.INPUTS}
-        label = download.label
         try:
             while not self._stopped and (study.running or study.late.running):
                 job = study if study.running else study.late
                 done = f" ({job.progress:.0%})" if job.progress > 0 else ""  # a comparison says none
                 download.label = f"Report: waiting for {job.WHAT}{done}"
                 await asyncio.sleep(REPORT_POLL_S)
-            download.filename = report_filename(study)
+            if self._stopped:
+                return no_report("the page was closed")
+            inputs = report_inputs(study)
+            download.filename = inputs.filename
             if {k: getattr(study, k) for k in Study.INPUTS} != clicked:
                 self._notify("info", "report: of the settings shown now, changed since Download was clicked")
-            text = await asyncio.get_running_loop().run_in_executor(None, study_report, study)
+            nbytes = inputs.bytes()
+            lease = memory.BUDGET.lease(nbytes, "this report") if nbytes else None
+            return await asyncio.get_running_loop().run_in_executor(None, rendered_report, inputs, lease)
         except (InputError, RunError) as err:
             self._notify("error", f"report: {err}")
-            text = f"<!DOCTYPE html><html><body><p>No report: {html.escape(str(err))}</p></body></html>"
+            return no_report(err)
         finally:
-            download.label = label
-        return io.BytesIO(text.encode("utf-8"))
+            download.label = REPORT_LABEL
 
     def template(self):
         share = pn.widgets.Button(name="Copy link to this view", sizing_mode="stretch_width")
@@ -433,7 +455,7 @@ class App(param.Parameterized):
         spinner = pn.indicators.LoadingSpinner(value=True, size=24, styles=pn.bind(
             lambda *running: {"opacity": "1" if any(running) else "0"}, *(j.param.running for j in self.jobs)))
         download = self._download = pn.widgets.FileDownload(
-            callback=self._report, filename="cosymp-report.html", label="Download report (HTML)",
+            callback=self._report, filename="cosymp-report.html", label=REPORT_LABEL,
             button_type="primary", sizing_mode="stretch_width")
         return pn.template.BootstrapTemplate(
             title="cosymp: structure-preserving integrators for time-dependent Hamiltonians",

@@ -609,10 +609,14 @@ class Study(Job):
             self.results = shown.with_loops(loops)
 
     def _on_view(self, event):
-        """A tab drawing the carried loops asks again for those of the runs shown that were refused
-        memory or failed as a whole (LateLoops.missed), unless a comparison is under way."""
+        if not self.running:  # else its end asks (`_finish`, `_failed`)
+            self._ask_missed_loops()
+
+    def _ask_missed_loops(self):
+        """Where a tab drawing the carried loops is shown, ask again for those of the runs shown that
+        were refused memory or failed as a whole (LateLoops.missed)."""
         runs, missed = self.results, self.carry.missed
-        if (event.new in LOOP_VIEWS and runs is not None and missed is not None and not self.running
+        if (self.view in LOOP_VIEWS and runs is not None and missed is not None
                 and not runs.loops_pending and runs.same_runs(missed)):
             self.results = dataclasses.replace(runs, loops_pending=True, loops_failure="")
             self.carry.ask(self.results)
@@ -736,6 +740,7 @@ class Study(Job):
         self.late.ask(runs.awaits if runs is not None else None)
         if runs is not None and runs.loops_pending:
             self.carry.ask(runs)
+        self._ask_missed_loops()
 
     def _inputs(self):
         """(scene, setups, h, T, the inputs as the study holds them, the Awaited reference or None,
@@ -792,10 +797,30 @@ def report_filename(study):
     return f"cosymp-{study.scene}-{study.method}.html"
 
 
-def study_report(study):
-    """The HTML report of the study's comparison (the views' own runs when they match the
-    inputs, else computed afresh), or InputError saying what to change."""
-    setups = study.setups()
+class ReportInputs(NamedTuple):
+    """What a study's report is made of, read at once (on the loop, as the page shows it): the
+    setups, h, T, the file name, and the views' own (Comparison, failure) pairs where they match
+    these inputs (None: computed afresh)."""
+
+    setups: tuple
+    h: float
+    T: float
+    filename: str
+    computed: list
+
+    def bytes(self):
+        """Memory the report computes beyond the page's runs: a comparison afresh, and a reference
+        where a comparison it takes is not measured (no exact flow; the page's awaits or lost its
+        own)."""
+        setups, h, T, computed = self.setups, self.h, self.T, self.computed
+        fresh = comparison_bytes(setups, h, T) if computed is None else 0
+        unmeasured = computed is None or any(c is not None and c.error is None for c, _ in computed)
+        return fresh + (reference_bytes(setups[0], h, T) if unmeasured and not setups[0].scene.has_flow else 0)
+
+
+def report_inputs(study):
+    """The study's ReportInputs, or InputError saying what to change."""
+    setups = tuple(study.setups())
     study.check_horizon()
     h, T = float(study.h), float(study.T)
     runs = study.results
@@ -804,8 +829,25 @@ def study_report(study):
             e.comparison is None or e.comparison.setup.values == s.values for e, s in zip(runs.entries, setups)) \
             and [e.method for e in runs.entries] == [s.method.name for s in setups]:
         computed = [(e.comparison, e.failure) for e in runs.entries]
-    report = scene_report(setups, h, T, report_command(setups, h, T, report_filename(study)), computed=computed)
-    return render(report)
+    return ReportInputs(setups, h, T, report_filename(study), computed)
+
+
+def rendered_report(inputs, lease=None):
+    """The HTML report of ReportInputs (in any thread: it reads no study); `lease`, the memory it
+    holds meanwhile (`ReportInputs.bytes`), is released when it is done."""
+    try:
+        setups, h, T = inputs.setups, inputs.h, inputs.T
+        report = scene_report(setups, h, T, report_command(setups, h, T, inputs.filename), computed=inputs.computed)
+        return render(report)
+    finally:
+        if lease is not None:
+            lease.release()
+
+
+def study_report(study):
+    """The HTML report of the study's comparison (the views' own runs when they match the
+    inputs, else computed afresh), or InputError saying what to change."""
+    return rendered_report(report_inputs(study))
 
 
 # ---------------------------------------------------------------- the sidebar and the header

@@ -1,5 +1,6 @@
 """The served page (app/main.py) composed in-process, without a server or a browser."""
 import asyncio
+import dataclasses
 import datetime
 import importlib
 import inspect
@@ -964,6 +965,131 @@ def test_the_report_waits_for_the_comparison_under_way_saying_so_and_takes_its_r
         text = (await task).read().decode()
         assert "--vs gauss4" in text and "--T 35 " in text
         assert notes == ["report: of the settings shown now, changed since Download was clicked"]
+        app._stop(None)
+
+    asyncio.run(scenario())
+
+
+def test_a_second_click_gets_the_report_being_made_and_the_button_its_label_back(monkeypatch):
+    """Each click ran its own wait; the last to end put back the label the first had set ('Report:
+    waiting ...' for good). A second click now waits for the first's report."""
+    from app import study
+
+    gate = threading.Event()
+    real_pair, made = study.run_pair, []
+    real_rendered = main.rendered_report
+
+    def held(*args, **kwargs):
+        gate.wait(30)
+        return real_pair(*args, **kwargs)
+
+    def rendered(*args):
+        made.append(args[0].filename)
+        return real_rendered(*args)
+
+    async def scenario():
+        app = main.App()
+        app.template()
+        monkeypatch.setattr(study, "run_pair", held)
+        monkeypatch.setattr(main, "rendered_report", rendered)
+        monkeypatch.setattr(study.Study, "quick", lambda self: False)
+        app.study.T = 30.0
+        first = asyncio.ensure_future(app._report())
+        await asyncio.sleep(0.2)
+        second = asyncio.ensure_future(app._report())
+        await asyncio.sleep(0.2)
+        gate.set()
+        a, b = (await first).read(), (await second).read()
+        assert a == b and len(made) == 1 and app._download.label == main.REPORT_LABEL
+        app._stop(None)
+
+    asyncio.run(scenario())
+
+
+def test_a_report_reads_the_page_on_the_loop_not_in_its_thread(monkeypatch):
+    """The executor busy (other pages' reports), the thread started late and read the study then:
+    the file named for midpoint held rk4's report (helper 33). It reads the inputs taken on the loop."""
+    async def scenario():
+        app = main.App()
+        app.template()
+        s = app.study
+        loop = asyncio.get_running_loop()
+        gate = threading.Event()
+        busy = [loop.run_in_executor(None, gate.wait, 30) for _ in range(64)]
+        task = asyncio.ensure_future(app._report())
+        await asyncio.sleep(0.1)
+        name, method = app._download.filename, s.method
+        s.method = "rk8"
+        gate.set()
+        await asyncio.gather(*busy)
+        text = (await task).read().decode()
+        assert name == f"cosymp-{s.scene}-{method}.html" and f"--method {method} " in text
+        app._stop(None)
+
+    asyncio.run(scenario())
+
+
+def test_a_report_of_a_page_closed_while_it_waits_is_not_made(monkeypatch):
+    from app import study
+
+    gate = threading.Event()
+    real_pair, made = study.run_pair, []
+
+    def held(*args, **kwargs):
+        gate.wait(30)
+        return real_pair(*args, **kwargs)
+
+    async def scenario():
+        app = main.App()
+        app.template()
+        monkeypatch.setattr(study, "run_pair", held)
+        monkeypatch.setattr(main, "rendered_report", lambda *args: made.append(args))
+        monkeypatch.setattr(study.Study, "quick", lambda self: False)
+        app.study.T = 30.0
+        task = asyncio.ensure_future(app._report())
+        await asyncio.sleep(0.2)
+        app._stop(None)
+        gate.set()
+        assert "No report: the page was closed" in (await task).read().decode() and made == []
+
+    asyncio.run(scenario())
+
+
+def test_what_a_report_computes_beyond_the_pages_runs_holds_its_memory(monkeypatch):
+    """A reference the budget refused the page was computed by the report anyway, in a thread, with
+    no lease; now the report leases it (refused alike: a message and a file saying so), and gives it
+    back when done."""
+    from app import study
+    from cosymp.report import scene as report_scene
+
+    computed = []
+    real = report_scene.reference_states
+    monkeypatch.setattr(report_scene, "reference_states", lambda *a, **k: computed.append(a) or real(*a, **k))
+
+    async def scenario():
+        app = main.App()
+        app.template()
+        notes = []
+        app._notify = lambda level, text: notes.append((level, text))
+        s = app.study
+        s.scene = "kapitza"
+        while s.running or s.late.running:
+            await asyncio.sleep(0.02)
+        inputs = study.report_inputs(s)
+        assert inputs.computed is not None and inputs.bytes() == 0, "the page's runs, measured: nothing more"
+        unmeasured = inputs._replace(computed=[(dataclasses.replace(c, error=None), f) for c, f in inputs.computed])
+        need = unmeasured.bytes()
+        assert need == study.reference_bytes(inputs.setups[0], inputs.h, inputs.T) > 0
+        monkeypatch.setattr(study, "report_inputs", lambda study_: unmeasured)
+        monkeypatch.setattr(main, "report_inputs", lambda study_: unmeasured)
+        monkeypatch.setattr(memory, "BUDGET", memory.MemoryBudget(cap_bytes=need // 2))
+        text = (await app._report()).read().decode()
+        assert text.startswith("<!DOCTYPE html><html><body><p>No report: this report needs about") and computed == []
+        assert notes and notes[-1][0] == "error"
+        budget = memory.MemoryBudget(cap_bytes=4 * need)
+        monkeypatch.setattr(memory, "BUDGET", budget)
+        text = (await app._report()).read().decode()
+        assert "No report" not in text and len(computed) == 1 and budget.used == 0
         app._stop(None)
 
     asyncio.run(scenario())

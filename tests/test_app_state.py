@@ -967,6 +967,7 @@ def test_a_late_reference_that_fails_or_is_refused_says_why_under_the_plots(monk
     monkeypatch.setattr(study, "LIVE_REFERENCE_STEPS", 0)
     s = Study(scene="charged")
     s.values = {"beta": "exp(t)"}
+    settled(s)  # a comparison not quick (a loaded machine's rate noted) leaves its reference a task of its loop
     failed = s.results
     monkeypatch.setattr(study, "LIVE_REFERENCE_STEPS", 10**9)
     live = Study(scene="charged", values={"beta": "exp(t)"}).results
@@ -1262,6 +1263,51 @@ def test_loops_the_memory_cap_refused_are_computed_when_a_tab_drawing_them_is_sh
     assert shown.same_runs(refused) and not shown.loops_pending and not shown.loops_failure
     assert all(e.comparison.cloud is not None for e in shown.entries) and s.carry._held.nbytes > 0
     assert s.carry.missed is None
+
+
+def test_loops_refused_are_asked_again_when_a_comparison_started_before_their_tab_was_shown_fails(monkeypatch):
+    """Cloud shown while a comparison runs asks nothing (the comparison's end will); where that
+    comparison fails as a whole, its failure asks for the loops refused before (helper 33: Cloud
+    kept saying 'not computed' with the memory free)."""
+    setups = Study(scene="damped").setups()
+    cap = study.comparison_bytes(setups, 0.1, 50.0) + study.loops_bytes(setups, 0.1, 50.0) // 2
+    monkeypatch.setattr(memory, "BUDGET", memory.MemoryBudget(cap_bytes=cap))
+    gate = threading.Event()
+
+    def failing(*args):
+        gate.wait(30)
+        raise RuntimeError("a defect")
+
+    async def scenario():
+        s = Study(scene="damped")
+        await until(lambda: not s.carry.running)
+        refused = s.results
+        assert refused.loops_failure and s.carry.missed is not None
+        monkeypatch.setattr(memory, "BUDGET", memory.MemoryBudget(cap_bytes=100 * cap))
+        monkeypatch.setattr(study, "run_pair", failing)
+        monkeypatch.setattr(Study, "quick", lambda self: False)
+        s.T = 30.0
+        await until(lambda: s.running)
+        s.view = "cloud"
+        assert s.results is refused, "asked when the comparison ends"
+        gate.set()
+        await until(lambda: not s.running and not s.carry.running)
+        shown = s.results
+        assert shown.same_runs(refused) and not shown.loops_failure and all(e.comparison.cloud is not None
+                                                                         for e in shown.entries)
+        s.release()
+
+    asyncio.run(scenario())
+
+
+def test_record_at_takes_a_run_to_T_as_reaching_T_within_check_steps_rounding():
+    """h = 0.03333333333 (a link's rounded 10/300) to T = 10 is 300 steps, ending at 9.999999999:
+    the loop at T was taken as beyond the loop's end (1e-12 relative) and left out, 'no loop at T'."""
+    h, T = 0.03333333333, 10.0
+    t = np.arange(check_step(h, T) + 1) * h
+    assert t[-1] < T and common.record_at(t, T) == len(t) - 1
+    assert common.record_at(t, 10.0 + h / 2) is None and common.record_at(t, 5.0) == 150
+    assert common.record_at(np.empty(0), 0.0) is None and common.record_at(t, 0.0) == 0
 
 
 def test_loops_shown_keep_their_memory_while_a_comparison_computes_and_after_it_fails(monkeypatch):

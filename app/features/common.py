@@ -29,8 +29,9 @@ def names(runs):
 
 def record_at(t, when):
     """The index of the record of times `t` nearest `when`, or None where `when` lies beyond the last
-    (the run or its carried loop stopped before it)."""
-    if not len(t) or when > t[-1] + 1e-12 * max(abs(t[-1]), 1.0):
+    (the run or its carried loop stopped before it) by more than check_step's 1e-9 relative: a run to
+    T ends within it (h = 0.03333333333, a link's rounded 10/300, ends 300 steps on at 9.999999999)."""
+    if not len(t) or when > t[-1] + 2e-9 * max(abs(when), 1.0):
         return None
     k = int(np.searchsorted(t, when))
     return k - 1 if k == len(t) or (k > 0 and when - t[k - 1] < t[k] - when) else k
