@@ -920,6 +920,20 @@ def test_a_components_parameters_are_writable_for_a_moment_as_panel_makes_them_a
                 assert after == before
 
 
+def held_comparisons(monkeypatch, gate):
+    """Comparisons that wait for the gate in their thread (none computed in a change's handler)."""
+    from app import study
+
+    real = study.run_pair
+
+    def held(*args, **kwargs):
+        gate.wait(30)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(study, "run_pair", held)
+    monkeypatch.setattr(study.Study, "quick", lambda self: False)
+
+
 def test_the_report_waits_for_the_comparison_under_way_saying_so_and_takes_its_runs(monkeypatch):
     """Download report while a comparison computes: the report computed it again, in the server's
     thread (no page answered meanwhile, the button said nothing: 20 s for kapitza at T = 5000). It
@@ -927,12 +941,8 @@ def test_the_report_waits_for_the_comparison_under_way_saying_so_and_takes_its_r
     from app import study
 
     gate = threading.Event()
-    real_pair, real_report = study.run_pair, study.scene_report
+    real_report = study.scene_report
     given = []
-
-    def held(*args, **kwargs):
-        gate.wait(30)
-        return real_pair(*args, **kwargs)
 
     def report(*args, computed=None, **kwargs):
         given.append(computed)
@@ -942,9 +952,8 @@ def test_the_report_waits_for_the_comparison_under_way_saying_so_and_takes_its_r
         app = main.App()
         app.template()
         label = app._download.label
-        monkeypatch.setattr(study, "run_pair", held)
+        held_comparisons(monkeypatch, gate)
         monkeypatch.setattr(study, "scene_report", report)
-        monkeypatch.setattr(study.Study, "quick", lambda self: False)
         app.study.T = 30.0
         task = asyncio.ensure_future(app._report())
         await asyncio.sleep(0.3)
@@ -973,15 +982,9 @@ def test_the_report_waits_for_the_comparison_under_way_saying_so_and_takes_its_r
 def test_a_second_click_gets_the_report_being_made_and_the_button_its_label_back(monkeypatch):
     """Each click ran its own wait; the last to end put back the label the first had set ('Report:
     waiting ...' for good). A second click now waits for the first's report."""
-    from app import study
-
     gate = threading.Event()
-    real_pair, made = study.run_pair, []
+    made = []
     real_rendered = main.rendered_report
-
-    def held(*args, **kwargs):
-        gate.wait(30)
-        return real_pair(*args, **kwargs)
 
     def rendered(*args):
         made.append(args[0].filename)
@@ -990,9 +993,8 @@ def test_a_second_click_gets_the_report_being_made_and_the_button_its_label_back
     async def scenario():
         app = main.App()
         app.template()
-        monkeypatch.setattr(study, "run_pair", held)
+        held_comparisons(monkeypatch, gate)
         monkeypatch.setattr(main, "rendered_report", rendered)
-        monkeypatch.setattr(study.Study, "quick", lambda self: False)
         app.study.T = 30.0
         first = asyncio.ensure_future(app._report())
         await asyncio.sleep(0.2)
@@ -1030,21 +1032,14 @@ def test_a_report_reads_the_page_on_the_loop_not_in_its_thread(monkeypatch):
 
 
 def test_a_report_of_a_page_closed_while_it_waits_is_not_made(monkeypatch):
-    from app import study
-
     gate = threading.Event()
-    real_pair, made = study.run_pair, []
-
-    def held(*args, **kwargs):
-        gate.wait(30)
-        return real_pair(*args, **kwargs)
+    made = []
 
     async def scenario():
         app = main.App()
         app.template()
-        monkeypatch.setattr(study, "run_pair", held)
+        held_comparisons(monkeypatch, gate)
         monkeypatch.setattr(main, "rendered_report", lambda *args: made.append(args))
-        monkeypatch.setattr(study.Study, "quick", lambda self: False)
         app.study.T = 30.0
         task = asyncio.ensure_future(app._report())
         await asyncio.sleep(0.2)

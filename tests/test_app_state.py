@@ -1265,6 +1265,16 @@ def test_loops_the_memory_cap_refused_are_computed_when_a_tab_drawing_them_is_sh
     assert s.carry.missed is None
 
 
+def failing_comparisons(monkeypatch, gate):
+    """Comparisons that fail as a whole once the gate opens, in their thread (none quick)."""
+    def failing(*args):
+        gate.wait(30)
+        raise RuntimeError("a defect")
+
+    monkeypatch.setattr(study, "run_pair", failing)
+    monkeypatch.setattr(Study, "quick", lambda self: False)
+
+
 def test_loops_refused_are_asked_again_when_a_comparison_started_before_their_tab_was_shown_fails(monkeypatch):
     """Cloud shown while a comparison runs asks nothing (the comparison's end will); where that
     comparison fails as a whole, its failure asks for the loops refused before (helper 33: Cloud
@@ -1274,18 +1284,13 @@ def test_loops_refused_are_asked_again_when_a_comparison_started_before_their_ta
     monkeypatch.setattr(memory, "BUDGET", memory.MemoryBudget(cap_bytes=cap))
     gate = threading.Event()
 
-    def failing(*args):
-        gate.wait(30)
-        raise RuntimeError("a defect")
-
     async def scenario():
         s = Study(scene="damped")
         await until(lambda: not s.carry.running)
         refused = s.results
         assert refused.loops_failure and s.carry.missed is not None
         monkeypatch.setattr(memory, "BUDGET", memory.MemoryBudget(cap_bytes=100 * cap))
-        monkeypatch.setattr(study, "run_pair", failing)
-        monkeypatch.setattr(Study, "quick", lambda self: False)
+        failing_comparisons(monkeypatch, gate)
         s.T = 30.0
         await until(lambda: s.running)
         s.view = "cloud"
@@ -1316,17 +1321,12 @@ def test_loops_shown_keep_their_memory_while_a_comparison_computes_and_after_it_
     let go at its start, and the loops stayed drawn)."""
     gate = threading.Event()
 
-    def failing(*args):
-        gate.wait(30)
-        raise RuntimeError("a defect")
-
     async def scenario():
         s = Study(scene="kapitza")
         await until(lambda: not s.results.loops_pending)
         shown, lease = s.results, s.carry._held
         assert lease.nbytes > 0
-        monkeypatch.setattr(study, "run_pair", failing)
-        monkeypatch.setattr(Study, "quick", lambda self: False)
+        failing_comparisons(monkeypatch, gate)
         s.T = 30.0
         await until(lambda: s.run is not None and s.run.inputs[3] == 30.0)
         assert s.results is shown and s.carry._held is lease and lease.nbytes > 0, "held while shown"
