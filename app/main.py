@@ -47,11 +47,6 @@ AHEAD_IDLE_S = 1.0  # after the last change in any page of the server
 GONE_MS = 1000  # a page whose browser has gone this long stops (App._watch)
 REPORT_POLL_S = 0.1  # how often the Download button's wait for the comparison looks and says its progress
 REPORT_LABEL = "Download report (HTML)"
-
-
-def no_report(why):
-    """The file a report that could not be made is: a page saying why."""
-    return f"<!DOCTYPE html><html><body><p>No report: {html.escape(str(why))}</p></body></html>"
 URL_MS = 250  # the URL follows a change of the shown state this long after (App._write_url)
 DISCARDING = set()  # the tasks discarding closed pages' sessions (App._discard)
 TOP_JS = "const main = document.getElementById('main'); if (main) main.scrollTop = 0;"  # the template's scrolled area
@@ -67,6 +62,11 @@ if (!(navigator.clipboard && window.isSecureContext)) {
     () => { clearTimeout(waited); done('Copy failed: use the address bar'); });
 }
 """
+
+
+def no_report(why):
+    """The file a report that could not be made is: a page saying why."""
+    return f"<!DOCTYPE html><html><body><p>No report: {html.escape(str(why))}</p></body></html>"
 
 
 class App(param.Parameterized):
