@@ -28,7 +28,7 @@ from cosymp.report import render
 from cosymp.report.scene import command as report_command
 from cosymp.report.scene import scene_report
 from cosymp.scenes import SCENES, first
-from cosymp.study import CLOUD_SAMPLES, carried_loop, loop_stride, with_reference
+from cosymp.study import carried_loop, loop_stride, with_reference
 from cosymp.study import compare_until_failure as study_until_failure
 
 from .jobs import Job, Note
@@ -104,8 +104,7 @@ def loops_bytes(setups, h, T):
     total = 0
     for s in setups:
         m = 2 * s.scene.ndof
-        stride = default_stride(steps, m + 2, m, increments=True)
-        every = stride * max(1, steps // (stride * CLOUD_SAMPLES))
+        every = loop_stride(steps, default_stride(steps, m + 2, m, increments=True))
         total += (steps // every + 1) * CLOUD_POINTS[s.scene.kernel.linear] * (m + 2)
     return BYTES_PER_LOOP_VALUE * total
 
@@ -218,7 +217,7 @@ def carried_loops(runs, progress=None):
     around each run's start, a linear map carrying a polygon to a polygon, so fewer suffice there),
     each method's in a thread of its own; progress(done, total) in steps over both. A loop that
     stops (Newton, overflow) is kept up to there, and said in `failure`: its run still shows to its end."""
-    ok = [e for e in runs.entries if e.comparison is not None]
+    ok = runs.ok
     done = dict.fromkeys(e.label for e in ok)
     total = sum(e.comparison.run.steps for e in ok)
 
@@ -231,7 +230,7 @@ def carried_loops(runs, progress=None):
                 progress(sum(v or 0 for v in done.values()), total)
 
         try:
-            return carried_loop(c.setup, runs.h, c.run.steps, loop_stride(c.run), c.run.z[0, 0],
+            return carried_loop(c.setup, runs.h, c.run.steps, loop_stride(c.run.steps, c.run.stride), c.run.z[0, 0],
                                 CLOUD_POINTS[c.setup.scene.kernel.linear], LOOP_RADIUS, told), ""
         except RunError as err:
             cloud = err.partial
@@ -394,7 +393,28 @@ class Kept(NamedTuple):
     final: bool
 
 
-class LateReference(Job):
+class ForRuns(Job):
+    """A computation for the study's runs, beside or after their comparison: it computes what it
+    was last asked (`asked`), in its thread with progress and cancel, and keeps the words of a
+    failure (`say`) for the study to show with the runs they are about, not as a notice. Its memory
+    is held while its result is shown."""
+
+    HOLD = True
+
+    def __init__(self, study, **params):
+        super().__init__(**params)
+        self.study = study
+        self.asked = None
+        self._said = ""
+
+    def say(self, note):
+        self._said = note.text
+
+    def _inputs(self):
+        return self.asked
+
+
+class LateReference(ForRuns):
     """The reference of a comparison too long to compute with it (`awaited`), computed in its thread
     from the moment the comparison starts (beside it), with progress and cancel, and kept for the
     study's runs that await it: a change of method measures the new runs against the kept one at
@@ -402,14 +422,10 @@ class LateReference(Job):
 
     KIND = "reference run"
     WHAT = "this reference run"
-    HOLD = True
 
     def __init__(self, study, **params):
-        super().__init__(**params)
-        self.study = study
-        self.asked = None  # the Awaited asked for last
-        self.kept = None  # the Kept of the last one computed
-        self._said = ""
+        super().__init__(study, **params)
+        self.kept = None  # the Kept of the last one computed (`asked`: the Awaited asked for last)
 
     def ask(self, awaits):
         """Compute the reference `awaits` (an Awaited; None: none is awaited now) unless it is being
@@ -429,13 +445,6 @@ class LateReference(Job):
         """The kept reference goes, and its memory."""
         self.kept = None
         self.let_go()
-
-    def say(self, note):
-        """Kept for the runs awaiting the reference, whose failure it is (`Study.arrived` says it)."""
-        self._said = note.text
-
-    def _inputs(self):
-        return self.asked
 
     def _bytes(self, a):
         return reference_bytes(a.setup, a.h, a.T)
@@ -462,7 +471,7 @@ class LateReference(Job):
         self.study.arrived(kept)
 
 
-class LateLoops(Job):
+class LateLoops(ForRuns):
     """The carried loops of the runs shown, computed after them (in its thread, with progress and
     cancel) where the comparison did not compute them (no tab drawing them was shown at its start,
     LOOP_VIEWS): the Orbits view's runs come without waiting for loops it does not draw (kapitza's
@@ -471,14 +480,10 @@ class LateLoops(Job):
 
     KIND = "carried loop"
     WHAT = "computing the carried loops"
-    HOLD = True
 
     def __init__(self, study, **params):
-        super().__init__(**params)
-        self.study = study
-        self.asked = None  # the Runs whose loops are computed
+        super().__init__(study, **params)
         self.missed = None  # the Runs whose loops were refused memory or failed as a whole (`_settle`)
-        self._said = ""
 
     def ask(self, runs):
         """Compute the loops of `runs` if they are pending (None: none now); what is under way for
@@ -492,11 +497,6 @@ class LateLoops(Job):
         if self.asked is not None:
             self.request()
 
-    def say(self, note):
-        """Kept for the runs whose loops it is about, and said under the loops' plots (`_settle`),
-        not as a notice: their tabs may not be shown."""
-        self._said = note.text
-
     def _refused(self):
         self._settle(self.asked)
 
@@ -508,9 +508,6 @@ class LateLoops(Job):
         shown (Study._on_view): the memory may be free by then."""
         self.missed = runs
         self.study.loops_arrived(runs, Loops({}, f"The carried loops were not computed: {self._said}"))
-
-    def _inputs(self):
-        return self.asked
 
     def _bytes(self, runs):
         return loops_bytes([e.comparison.setup for e in runs.ok], runs.h, runs.T)

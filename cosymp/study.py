@@ -106,7 +106,7 @@ def compare(setup, h, T, delta=1e-4, cloud_points=0, cloud_radius=0.05, stride=N
     cloud = None
     area = np.empty(0)
     if cloud_points:
-        cloud, area = carried_loop(setup, h, run.steps, loop_stride(run), base, cloud_points, cloud_radius)
+        cloud, area = carried_loop(setup, h, run.steps, loop_stride(run.steps, run.stride), base, cloud_points, cloud_radius)
     error = orbit_error = None
     if setup.scene.has_flow:
         exact = simulate(Setup.make(setup.scene, "exact", setup.values), h, run.steps * h, z0=base[None],
@@ -120,10 +120,10 @@ def compare(setup, h, T, delta=1e-4, cloud_points=0, cloud_radius=0.05, stride=N
                       time.thread_time() - start, "the exact flow" if error is not None else None, orbit_error)
 
 
-def loop_stride(run):
-    """The stride at which a carried loop beside `run` is recorded: about CLOUD_SAMPLES times, a
-    multiple of the run's stride."""
-    return run.stride * max(1, run.steps // (run.stride * CLOUD_SAMPLES))
+def loop_stride(steps, stride):
+    """The stride at which a carried loop beside a run of `steps` steps recorded every `stride`-th is
+    recorded: about CLOUD_SAMPLES times, a multiple of the run's stride."""
+    return stride * max(1, steps // (stride * CLOUD_SAMPLES))
 
 
 def carried_loop(setup, h, steps, stride, base, points, radius=0.05, progress=None):

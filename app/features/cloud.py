@@ -101,9 +101,9 @@ def shape_note(runs):
     loops = [(e.label, e.comparison) for e in runs.entries if e.comparison is not None and e.comparison.cloud is not None]
     if not loops:
         return ""
-    name, c = next(((n, c) for n, c in loops if record_at(c.cloud.t, runs.T) is not None), loops[0])
-    end = c.cloud.t[-1]
-    when = "At T," if record_at(c.cloud.t, runs.T) is not None else f"At t = {end:.6g}, where it ends,"
+    reaching = [(n, c) for n, c in loops if record_at(c.cloud.t, runs.T) is not None]
+    name, c = (reaching or loops)[0]
+    when = "At T," if reaching else f"At t = {c.cloud.t[-1]:.6g}, where it ends,"
     q, p = c.cloud.q[:, :, 0], c.cloud.p[:, :, 0]
     width = np.ptp(q, axis=1)
     height = np.ptp(p, axis=1)
