@@ -95,6 +95,15 @@ def row(D, P, C, j):
             C[j, ncoef(P)] = np.nan
 
 
+@njit(**INLINE)
+def stage_row(D, i):
+    """The coefficient row of explicit stage i: 0, a constant, where D has one row (explicit Euler).
+    Read from D.stage, a run-time index, the row stayed in memory and its coefficients were loaded
+    every step; indexed by a constant, the compiler keeps it in registers (modulated euler 19.5 ->
+    18.0 ns a step)."""
+    return 0 if len(D.offsets) == 1 else D.stage[i]
+
+
 @njit(**IR_INLINE)
 def _newton_done(dz, ndz, z, nz, prev):
     """Converged to round-off: a small correction, or one that stopped shrinking near the floor."""
@@ -195,12 +204,13 @@ def explicit_step(D, P, C, t, h, z, pt, W):
             if a != 0.0:
                 for r in range(m):
                     Y[r] += a * K[j, r]
-        row(D, P, C, D.stage[i])
-        grad(P, C, D.stage[i], Y, g)
+        j = stage_row(D, i)
+        row(D, P, C, j)
+        grad(P, C, j, Y, g)
         for r in range(n):
             K[i, r] = g[n + r]
             K[i, n + r] = -g[r]
-        dpt += D.b[i] * dhdt(P, C, D.stage[i], Y)
+        dpt += D.b[i] * dhdt(P, C, j, Y)
     for i in range(s):
         bh = h * D.b[i]
         for r in range(m):

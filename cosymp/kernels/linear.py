@@ -12,7 +12,7 @@ it cost damped midpoint's one-member run with every figure 48-50 ns a step inste
 from numba import njit
 
 from .dispatch import INLINE, IR_INLINE, flow, ndof, step
-from .families import boris_core
+from .families import boris_core, stage_row
 from .linalg import solve
 from .stack import matrices, stage_matrices, stage_square, vectors
 
@@ -195,7 +195,7 @@ def explicit_lmatrix(D, P, C, t, h, M, Q, W):
             Q[i, c] = 0.0
     total = 0.0
     for i in range(s):
-        row = D.stage[i]
+        row = stage_row(D, i)
         identity(G, m)
         for j in range(i):
             a = h * D.A[i * s + j]
