@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from numba import njit
 
-from cosymp.kernels.dispatch import coef, dhdt, energy, grad, hess, ncoef
+from cosymp.kernels.dispatch import coef, dhdt, energy, energy_coef, grad, hess, ncoef
 from cosymp.scenes import SCENES
 
 STEP = 1e-30
@@ -77,3 +77,32 @@ def test_grad_hess_and_dhdt_are_the_derivatives_of_the_energy(scene, values, rng
         fd = (-H[0] + 9 * H[1] - 45 * H[2] + 45 * H[3] - 9 * H[4] + H[5]) / (60 * d)
         Ht = evaluate(P, t, z, np.zeros(m))[0][1]
         assert Ht == pytest.approx(fd, abs=1e-7 * max(1.0, abs(fd))), f"dH/dt at t = {t}, z = {z}"
+
+
+@njit
+def _rows(P, t, z, C, out):
+    """C[0] = coef's row at t, C[1] = energy_coef's (over whatever C[1] held); out = H(z) from each."""
+    coef(P, t, C, 0)
+    energy_coef(P, t, C, 1)
+    out[0] = energy(P, C, 0, z)
+    out[1] = energy(P, C, 1, z)
+
+
+@pytest.mark.parametrize("scene,values", CASES)
+def test_the_energy_row_gives_the_energy_of_the_whole_row(scene, values, rng):
+    """energy_coef (what H reads of a row, where it costs less than coef: H after every step) gives
+    H bit for bit as coef's row does, from a row that held NaN before: it writes all that energy
+    reads. And a scene that declares its S(t) and dS/dt diagonal (its forms skip the couplings:
+    scenes.quadratic) has them so: every coupling of the row exactly 0."""
+    P = scene.pack(values)
+    m = 2 * scene.ndof
+    for _ in range(SAMPLES):
+        t = rng.uniform(-5.0 * scene.time_scale, 5.0 * scene.time_scale)
+        z = rng.uniform(-1.5, 1.5, m)
+        C, out = np.full((2, scene.kernel.ncoef), np.nan), np.empty(2)
+        _rows(P, t, z, C, out)
+        assert np.isfinite(out[0]) and out[1] == out[0], f"H at t = {t}, z = {z}"
+        if scene.kernel.diagonal:
+            S, dS = C[0, :m * m].reshape(m, m), C[0, m * m:2 * m * m].reshape(m, m)
+            off = ~np.eye(m, dtype=bool)
+            assert np.all(S[off] == 0.0) and np.all(dS[off] == 0.0), f"couplings at t = {t}"

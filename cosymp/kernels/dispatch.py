@@ -111,8 +111,10 @@ def registered(cls):
     return _REGISTERED[cls]
 
 
-def _target(cls, name):
+def _target(cls, name, fallback=None):
     fn = getattr(registered(cls), name, None)
+    if fn is None and fallback is not None:
+        fn = getattr(registered(cls), fallback, None)
     if fn is None:
         raise TypingError(f"{cls.__name__} provides no '{name}'")
     return fn
@@ -140,8 +142,9 @@ def _forwarder(fn, arity):
     return impl
 
 
-def _dispatched(name, arity, doc, scratch=False):
-    """A stub whose call in jitted code becomes a call of the registered implementation."""
+def _dispatched(name, arity, doc, scratch=False, fallback=None):
+    """A stub whose call in jitted code becomes a call of the registered implementation (of
+    `fallback` where the table gives none for `name`)."""
     params = ("k", "a", "b", "c", "d", "e", "f", "g")[:arity]
 
     def stub(*args):
@@ -153,7 +156,7 @@ def _dispatched(name, arity, doc, scratch=False):
         [inspect.Parameter(p, inspect.Parameter.POSITIONAL_OR_KEYWORD) for p in params])
 
     def _overload(*types):
-        return _forwarder(_target(types[0].instance_class, name), arity)
+        return _forwarder(_target(types[0].instance_class, name, fallback), arity)
 
     _overload.__signature__ = stub.__signature__
     if scratch:
@@ -181,6 +184,8 @@ def _constant(name, doc):
 
 coef = _dispatched("coef", 4, "Fill row j of C with the time coefficients at t: coef(P, t, C, j)")
 energy = _dispatched("energy", 4, "H(z) from coefficient row j: energy(P, C, j, z)")
+energy_coef = _dispatched("energy_coef", 4, "Fill what `energy` reads of row j of C at t (all of coef where the "
+                          "scene gives no energy_coef): energy_coef(P, t, C, j)", fallback="coef")
 grad = _dispatched("grad", 5, "Gradient of H in z = (q, p): grad(P, C, j, z, g)")
 hess = _dispatched("hess", 5, "Hessian of H in z: hess(P, C, j, z, Hm)")
 dhdt = _dispatched("dhdt", 4, "Partial derivative of H in t: dhdt(P, C, j, z)")
@@ -207,6 +212,7 @@ lwork = _dispatched("lwork", 2, "Stack work arrays of family D's step matrices: 
                     scratch=True)
 ndof = _constant("ndof", "Degrees of freedom n of the scene (z has 2n entries).")
 ncoef = _constant("ncoef", "Length of the scene's time-coefficient vector.")
+diagonal = _constant("diagonal", "Whether the scene's H is quadratic with S(t) and dS/dt diagonal (scenes.quadratic).")
 is_linear = _constant("linear", "Whether H is quadratic in z, so implicit steps solve linear equations (no Newton "
                       "iteration to convergence).")
 interleaved = _constant("interleaved", "Whether family D's step computes each coefficient row where a stage first "

@@ -18,6 +18,7 @@ from .dispatch import (
     coef,
     dhdt,
     energy,
+    energy_coef,
     grad,
     lmatrix,
     lwork,
@@ -55,10 +56,11 @@ def scaling_at(P, t):
 
 
 @njit(**INLINE)
-def _coefs(D, P, tk, tk1, h, tau, C, reuse):
+def _coefs(D, P, tk, tk1, h, tau, C, reuse, B, b):
     """Time coefficients at family D's offsets for the step from tk to tk1, read at the scene's
-    time shifted by tau. With `reuse`, the end of the last step (same scaling) is the start of
-    this one (computed or still pending). Where D's rows are `pending` (an interleaved family on a
+    time shifted by tau. With `reuse`, row b of B holds the first row (computed or still pending):
+    the last step's end (same scaling), row u - 1 of C itself, or the row the fused loop computed
+    there for H (kernels.survey._fused). Where D's rows are `pending` (an interleaved family on a
     nonlinear scene), each row is left for the step to compute where it uses it
     (kernels.families.row): its time goes in the last column, which the step sets to NaN."""
     offsets = D.offsets
@@ -67,7 +69,7 @@ def _coefs(D, P, tk, tk1, h, tau, C, reuse):
     for j in range(u):
         if j == 0 and reuse:
             for c in range(nc + 1):
-                C[0, c] = C[u - 1, c]
+                C[0, c] = B[b, c]
             continue
         t = (tk1 if offsets[j] == 1.0 else tk + offsets[j] * h) - tau
         if pending(D, P):
@@ -85,12 +87,12 @@ def _reusable(D):
 
 
 @njit(**INLINE)
-def _step_start(D, P, t0, h, g, fresh, scaled, prev, tau, up, down, C, reusable):
+def _step_start(D, P, t0, h, g, fresh, scaled, prev, tau, up, down, C, reusable, B, b):
     """The start of step g from t0: its scaling (`_scale`, given the last step's) and its time
-    coefficients into C (`_coefs`, reusing the last step's end unless `fresh` or the scaling
-    changed). Returns (e, tau, 2^e, 2^-e, the step's start time shifted by tau)."""
+    coefficients into C (`_coefs`, reusing row b of B, the last step's end, unless `fresh` or the
+    scaling changed). Returns (e, tau, 2^e, 2^-e, the step's start time shifted by tau)."""
     e, tau, up, down = _scale(P, t0 + g * h, scaled, prev, tau, up, down)
-    _coefs(D, P, t0 + g * h, t0 + (g + 1) * h, h, tau, C, reusable and not fresh and e == prev)
+    _coefs(D, P, t0 + g * h, t0 + (g + 1) * h, h, tau, C, reusable and not fresh and e == prev, B, b)
     return e, tau, up, down, t0 + g * h - tau
 
 
@@ -243,9 +245,10 @@ def _advance(D, P, C, tk, h, z, W, e, up, down, S, Cc):
 
 @njit(**INLINE)
 def coef_at(P, t, C):
-    """Row 0 of C at t, read at the step's shifted time; returns that step's (e, 2^e, 2^-e)."""
+    """What H reads of row 0 of C at t (energy_coef), read at the step's shifted time; returns that
+    step's (e, 2^e, 2^-e)."""
     e, tau = scaling_at(P, t)
-    coef(P, t - tau, C, 0)
+    energy_coef(P, t - tau, C, 0)
     up, down = _factors(e)
     return e, up, down
 
@@ -253,11 +256,14 @@ def coef_at(P, t, C):
 @njit(**INLINE)
 def energy_at(P, C, z, zs, e, up, down):
     """H of the state z (copied into zs and scaled: H is invariant under the scaling) from row 0
-    of C, given coef_at's scaling."""
+    of C, given coef_at's scaling; NaN (no value, as the figures read it) where it is not finite.
+    A state near the end of the floating-point range gave NaN by accident, 0 x Inf in the couplings
+    of its scaled copy; a diagonal form (scenes.quadratic) skips them and gave Inf."""
     for r in range(zs.shape[0]):
         zs[r] = z[r]
     _rescale(zs, P, e, down, up)
-    return energy(P, C, 0, zs)
+    H = energy(P, C, 0, zs)
+    return H if np.isfinite(H) else np.nan
 
 
 @njit(**INLINE)
@@ -310,7 +316,8 @@ def _matrix_loop(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, s
     tau = 0.0
     up = down = 1.0
     for k in range(nsteps):
-        e, tau, up, down, tk = _step_start(D, P, t0, h, k, k == 0, scaled, prev, tau, up, down, C, reusable)
+        e, tau, up, down, tk = _step_start(D, P, t0, h, k, k == 0, scaled, prev, tau, up, down, C, reusable,
+                                           C, np.int64(len(D.offsets) - 1))
         prev = e
         s = lmatrix(D, P, C, tk, h, M, Q, LW)
         due -= 1
@@ -358,7 +365,8 @@ def _one_loop(D, P, t0, h, Z, PT, nsteps, stride, Trec, Zrec, PTrec, dZrec, scal
     tau = 0.0
     up = down = 1.0
     for k in range(nsteps):
-        e, tau, up, down, tk = _step_start(D, P, t0, h, k, k == 0, scaled, prev, tau, up, down, C, reusable)
+        e, tau, up, down, tk = _step_start(D, P, t0, h, k, k == 0, scaled, prev, tau, up, down, C, reusable,
+                                           C, np.int64(len(D.offsets) - 1))
         prev = e
         for r in range(m):
             old[r] = z[r]
@@ -417,7 +425,7 @@ def tangent_matrix(D, P, h, T, Z, PT, M):
     Q = matrices(P, 1, 0.0)[0][:0]  # M alone (kernels.linear)
     for k in range(T.shape[0]):
         tau = scaling_at(P, T[k])[1]
-        _coefs(D, P, T[k], T[k] + h, h, tau, C, False)
+        _coefs(D, P, T[k], T[k] + h, h, tau, C, False, C, np.int64(0))
         lmatrix(D, P, C, T[k] - tau, h, M[k], Q, LW)
     return OK, T.shape[0]
 
@@ -435,7 +443,7 @@ def tangent_complex(D, P, h, T, Z, PT, M):
     zs = vectors(P, 1, 0.0)[0]
     for k in range(Z.shape[0]):
         e, tau = scaling_at(P, T[k])
-        _coefs(D, P, T[k], T[k] + h, h, tau, C, False)
+        _coefs(D, P, T[k], T[k] + h, h, tau, C, False, C, np.int64(0))
         for r in range(m):
             zs[r] = Z[k, r]
         up, down = _factors(e)

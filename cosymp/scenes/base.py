@@ -81,6 +81,13 @@ class SceneKernel:
     gives the flows the near-integrable splittings compose: rotate(P, t0, tau, z), the flow of
     H0 + p_t from t0 to t0 + tau, and nudge(P, C, j, tau, z), the flow of H - H0 for a time tau at
     the time of row j, each returning its p_t increment.
+
+    energy_coef(P, t, C, j) fills only what energy reads of row j, where that costs less than coef
+    (H after every step, at a time where the step has no row: kernels.survey._energy_after; the
+    modulated oscillator's sin(αt) without its cos). None: coef.
+
+    diagonal: H is quadratic (scenes.quadratic) with S(t) and dS/dt diagonal, so that its forms skip
+    the couplings, which are zero.
     """
 
     ndof: int
@@ -102,6 +109,8 @@ class SceneKernel:
     rotate: Callable = None
     nudge: Callable = None
     scaled_beyond: Callable = None
+    energy_coef: Callable = None
+    diagonal: bool = False
 
 
 @dataclass(frozen=True)

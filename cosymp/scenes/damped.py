@@ -110,7 +110,7 @@ SCENE = Scene(
     kernel=SceneKernel(ndof=1, ncoef=quadratic.ncoef(1), linear=True, coef=coef,
                        energy=quadratic.energy, grad=quadratic.grad, hess=quadratic.hess,
                        dhdt=quadratic.dhdt, flow=flow, scaling=scaling, shift=shift, kick=quadratic.kick, drift=drift,
-                       scaled_beyond=scaled_beyond),
+                       scaled_beyond=scaled_beyond, diagonal=True),
     Params=DampedParams,
     h=0.1,
     T=50.0,

@@ -18,6 +18,12 @@ def coef(P, t, C, r):
 
 
 @njit(**INLINE)
+def energy_coef(P, t, C, r):
+    """What energy reads of row r: g(t) alone."""
+    C[r, 0] = P.w0 * P.w0 - P.a * P.nu * P.nu * np.cos(P.nu * t)
+
+
+@njit(**INLINE)
 def energy(P, C, r, z):
     return 0.5 * z[1] * z[1] - C[r, 0] * np.cos(z[0])
 
@@ -67,7 +73,7 @@ SCENE = Scene(
         Param("p0", 0.0, "initial angular momentum p(0)", (-1e3, 1e3), initial=True),
     ),
     kernel=SceneKernel(ndof=1, ncoef=2, linear=False, coef=coef, energy=energy, grad=grad,
-                       hess=hess, dhdt=dhdt, kick=kick, drift=free_drift),
+                       hess=hess, dhdt=dhdt, kick=kick, drift=free_drift, energy_coef=energy_coef),
     Params=KapitzaParams,
     h=0.005,
     T=20.0,

@@ -21,6 +21,16 @@ def coef(P, t, C, r):
 
 
 @njit(**INLINE)
+def energy_coef(P, t, C, r):
+    """What quadratic.energy reads of row r (S and s): coef without its cos(αt)."""
+    quadratic.put_S(P, C, r, 0, 0, 1.0 + P.eps * np.sin(P.alpha * t))
+    quadratic.put_S(P, C, r, 0, 1, 0.0)
+    quadratic.put_S(P, C, r, 1, 0, 0.0)
+    quadratic.put_S(P, C, r, 1, 1, 1.0)
+    quadratic.put_s(P, C, r, 0.0)
+
+
+@njit(**INLINE)
 def rotate(P, t0, tau, z):
     """The flow of H0 + p_t, H0 = (q² + p²)/2 (the unmodulated oscillator): (q, p) turn by the angle
     tau, t moves by tau; p_t stays (H0 does not depend on t)."""
@@ -58,7 +68,8 @@ SCENE = Scene(
     ),
     kernel=SceneKernel(ndof=1, ncoef=quadratic.ncoef(1), linear=True, coef=coef,
                        energy=quadratic.energy, grad=quadratic.grad, hess=quadratic.hess,
-                       dhdt=quadratic.dhdt, kick=quadratic.kick, drift=free_drift, rotate=rotate, nudge=nudge),
+                       dhdt=quadratic.dhdt, kick=quadratic.kick, drift=free_drift, rotate=rotate, nudge=nudge,
+                       energy_coef=energy_coef, diagonal=True),
     Params=ModulatedParams,
     h=0.1,
     T=50.0,
