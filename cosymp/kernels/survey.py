@@ -408,7 +408,8 @@ def _flush(env, tb, b, t, h_min, h_max, vol_min, vol_max, det, symp):
 def _fused(D, P, t0, first, h, Z, PT, S, Cc, nsteps, every, want, width, acc, env, tb, G,
            gstate, scaled, stride, Trec, Zrec, PTrec, dZrec, F):
     """Member steps, as kernels.loops.propagate_one takes them (so a run's states are those
-    of `simulate`; by the step matrix for members 1.. of a linear scene's run that records
+    of `simulate`, to round-off: the same step compiled in two loops may contract its products
+    differently, tests/test_drive.py; by the step matrix for members 1.. of a linear scene's run that records
     nothing, see _member), and member 0's tangent map (_tangent) at the mapped steps. The figures are
     reduced in local variables and a stack copy of the growth product, written back once per
     call (stored into the arrays every step, they cost 6-10 ns a step: the compiler must assume
