@@ -205,7 +205,6 @@ def explicit_step(D, P, C, t, h, z, pt, W):
                 for r in range(m):
                     Y[r] += a * K[j, r]
         j = stage_row(D, i)
-        row(D, P, C, j)
         grad(P, C, j, Y, g)
         for r in range(n):
             K[i, r] = g[n + r]

@@ -16,10 +16,13 @@ FamilyKernel.__doc__ = """evaluations(D, linear): gradients of H per step of fam
 Newton iteration makes it run-dependent: implicit steps on a nonlinear scene, or no vector field at
 all: the exact flow). mirror(D): (C function, its arguments after the offsets) in bench_ref.c, or
 None where the C mirror has no such family. interleaved: whether the step computes each
-coefficient row where a stage first uses it (explicit stages: the row's transcendentals then overlap
-the previous stages' dependency chain; measured on kapitza, Blanes & Moan's SRKN11b: 425 -> 273 ns a step in a
-plain numba loop), instead of the loop computing every row before the step (an implicit step uses
-every row in each Newton iteration)."""
+coefficient row where a stage first uses it, calling kernels.families.row before it reads one (a
+splitting's kicks: the row's transcendentals then overlap the previous kicks' dependency chain;
+measured on kapitza, Blanes & Moan's SRKN11b: 425 -> 273 ns a step in a plain numba loop), instead
+of the loop computing every row before the step (an implicit step uses every row in each Newton
+iteration). Not the Runge-Kutta tableaus: on kapitza, rows computed before the step took rk4 107 ->
+92 ns a step (1.18 -> 1.01x a plain numba loop, benchmarks/plain.py) and left euler and rk8 as they
+were (within 2 %)."""
 
 
 def _f64(values):
@@ -36,7 +39,7 @@ FAMILIES = {
     f.Explicit: FamilyKernel(f.explicit_step, f.explicit_work, lin.explicit_lmatrix, lin.explicit_lwork,
                              lambda D, linear: float(len(D.b)),
                              lambda D: ("run_explicit", (_f64(D.A), _f64(D.b), np.array(D.stage, dtype=np.int64),
-                                                         len(D.b))), True),
+                                                         len(D.b))), False),
     f.Theta: FamilyKernel(f.theta_step, f.theta_work, lin.theta_lmatrix, lin.theta_lwork,
                           _implicit(lambda D: 1),
                           lambda D: ("run_theta", (float(D.wq0), float(D.wq1), float(D.wp0), float(D.wp1))), False),
