@@ -23,6 +23,7 @@ from .integrate import (
     failure_message,
     initial_states,
     records,
+    simulate,
     start_pt,
 )
 from .kernels.families import OK
@@ -109,7 +110,6 @@ class Drive:
         before the failing one have taken that step), and later calls do nothing."""
         if self.failure:
             return {k: np.empty(0) for k in ("t",) + ENV} if self.width else None
-        s = self.setup
         N, m = self.Z.shape
         bins = -(-steps // self.width) if self.width else 0
         env = np.empty((bins, len(ENV)))
@@ -123,9 +123,7 @@ class Drive:
         self.done += k
         self.t = self.t0 + self.done * self.h
         if status != OK:
-            step = round(self.t0 / self.h) + self.done
-            msg = failure_message(status, step, self.t, self.h, not in_tangent and _exact_overflows(s, self.t, self.h))
-            self.failure = f"tangent map: {msg}" if in_tangent else msg
+            self.failure = self._stopped(status, in_tangent)
             bins = -(-k // self.width) if self.width else 0
         if not self.width:
             return None
@@ -135,6 +133,23 @@ class Drive:
         if N < m + 2:
             out["vol_min"] = out["vol_max"] = np.full(bins, math.nan)
         return out
+
+    def _stopped(self, status, in_tangent):
+        """The message of the failure that stopped the run in the step from self.t (the members'
+        states in Z: there, or one step on for those before the failing one). A tangent map is
+        formed before its step, by the step itself in complex arithmetic (kernels.survey._tangent):
+        where its Newton fails and the step's own fails too, the failure is the step's, and is
+        named so."""
+        s = self.setup
+        step = round(self.t0 / self.h) + self.done
+        if in_tangent:
+            try:
+                simulate(s, self.h, self.h, z0=self.Z[:1], t0=self.t)
+            except RunError:
+                in_tangent = False
+        msg = failure_message(status, step, self.t, self.h, not in_tangent and _exact_overflows(s, self.t, self.h),
+                              (s, self.Z, self.t))
+        return f"tangent map: {msg}" if in_tangent else msg
 
     def _call(self, steps, env, tb, stride, Trec, Zrec, PTrec, dZrec, F, H):
         """One call of the fused loop from the run's current state: (status, k, in_tangent)."""
@@ -178,10 +193,7 @@ class Drive:
         self.done += k
         self.t = self.t0 + self.done * self.h
         if status != OK:
-            step = round(self.t0 / self.h) + self.done
-            overflows = not in_tangent and _exact_overflows(self.setup, self.t, self.h)
-            msg = failure_message(status, step, self.t, self.h, overflows)
-            self.failure = traj.failure = f"tangent map: {msg}" if in_tangent else msg
+            self.failure = traj.failure = self._stopped(status, in_tangent)
             raise RunError(self.failure, self.t, self.done, traj)
         if not self.want & WANT_MAPS:
             F[:, :2] = np.nan

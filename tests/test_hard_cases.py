@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 from conftest import setup
+from cosymp.drive import Drive
 from cosymp.errors import RunError
-from cosymp.integrate import simulate
+from cosymp.integrate import local_rate, simulate
 from cosymp.kernels.loops import vector_field
 from cosymp.methods import METHODS
 from cosymp.reference import reference_final, scipy_reference
@@ -324,13 +325,42 @@ def test_newton_on_kapitza_converges_to_round_off_at_large_steps(h):
     assert worst < 1e-13
 
 
-def test_newton_failure_on_kapitza_names_the_step_and_keeps_the_data():
-    """At h = 0.5 with a strong drive the midpoint equations have no nearby solution: the run stops
-    at the first such step with 'reduce h', and every step before it is a converged one."""
+def kapitza_rate(s, z, t, h):
+    """Kapitza's fastest local rate over the step from (z, t), in closed form: the Jacobian of
+    (p, -g(t) sin q) is [[0, 1], [-g cos q, 0]], eigenvalues +-sqrt(-g cos q), at local_rate's times."""
+    P = s.P
+    g = P.w0 ** 2 - P.a * P.nu ** 2 * np.cos(P.nu * np.linspace(t, t + h, 9))
+    return float(np.max(np.sqrt(np.abs(g * np.cos(z[0])))))
+
+
+def test_newton_failure_on_kapitza_says_how_far_to_reduce_h():
+    """At h = 0.5 with a strong drive (a = 0.3, nu = 40) the midpoint equations have no nearby
+    solution: the run stops at the first such step, every step before it a converged one. 'Reduce h'
+    alone misled there: 0.4, 0.3, 0.2 and 0.1 fail sooner (steps 31, 8, 8, 3). The message gives the
+    flow's local rate at the failing state (Kapitza's closed form), and an h below 1 / rate, which
+    runs the whole horizon."""
     s = setup("kapitza", "midpoint", a=0.3, nu=40.0, q0=3.0)
     with pytest.raises(RunError) as info:
         simulate(s, 0.5, 100.0)
     err = info.value
-    assert f"Newton did not converge in step {err.step + 1}" in str(err) and "reduce h" in str(err)
     part = err.partial
     assert part.steps == err.step and np.all(np.isfinite(part.z))
+    rate = kapitza_rate(s, part.z[-1, 0], err.time, 0.5)
+    assert local_rate(s, part.z[-1, 0], err.time, err.time + 0.5) == pytest.approx(rate, rel=1e-6)
+    assert f"Newton did not converge in step {err.step + 1}" in str(err)
+    assert f"fastest local rate there is {rate:.3g}, h times it {0.5 * rate:.2g}; take h below {1 / rate:.2g}" in str(err)
+    below = float(str(err).split("take h below ")[1].split()[0])
+    run = simulate(s, below, 100.0)
+    assert run.t[-1] >= 100.0 and np.all(np.isfinite(run.z))
+
+
+def test_a_failing_tangent_map_is_named_as_the_failing_step_it_is():
+    """The fused driver forms a step's tangent map (by the step itself, in complex arithmetic)
+    before the step: where that Newton fails, the step's own fails too, and the message names the
+    step, not the map. Same message as simulate's, with the rate."""
+    s = setup("kapitza", "midpoint", a=0.3, nu=40.0, q0=3.0)
+    with pytest.raises(RunError) as info:
+        simulate(s, 0.5, 100.0)
+    drive = Drive(s, 0.5, every=1)
+    drive.run(200, strict=False)
+    assert drive.failure == str(info.value)
