@@ -91,7 +91,7 @@ def tangent_maps(traj, member=0, last=False):
     M = np.empty((len(t), z.shape[1], z.shape[1]))
     status, k = tangent(s)(s.data, s.P, float(traj.h), t, z, pt, M)
     if status != OK:
-        msg = failure_message(status, k * traj.stride, t[k], traj.h, at=(s, z[k], t[k]))
+        msg = failure_message(status, k * traj.stride, t[k], traj.h, at=(s, z[k]))
         raise RunError(f"tangent map: {msg}", t[k], k * traj.stride)
     return M
 

@@ -1,5 +1,6 @@
 """Runs: checked input, one compiled loop per run or ensemble, results with p_t and H + p_t."""
 import functools
+import itertools
 import math
 import time
 from dataclasses import dataclass, field
@@ -8,7 +9,7 @@ import numpy as np
 
 from . import warm
 from .errors import InputError, RunError, as_number, quoted
-from .kernels.families import NEWTON, OK, OVERFLOW, SINGULAR, START
+from .kernels.families import NEWTON, OK, OVERFLOW, SINGULAR, START, Composition, Gauss, Theta
 from .kernels.loops import energies, propagate_matrix, propagate_one, vector_field
 from .methods import method as get_method
 from .scenes import SCENES
@@ -270,8 +271,13 @@ def simulate(setup, h, T, z0=None, stride=None, increments=False, t0=0.0, pt0=No
     traj = Trajectory(setup, h, stride, Trec[:kept], Zrec[:kept], PTrec[:kept], H[:kept], done, wall,
                       dZrec[:kept] if increments else None)
     t_fail = t0 + done * h
+    state = Zrec[kept - 1]
+    if status in (NEWTON, SINGULAR) and done > (kept - 1) * stride:
+        # the steps from the last record to the failing one, taken again (all converged): its start
+        left = done - (kept - 1) * stride
+        state = simulate(setup, h, left * h, z0=state, stride=left, t0=Trec[kept - 1], pt0=0.0).z[-1]
     traj.failure = failure_message(status, round(t0 / h) + done, t_fail, h, _exact_overflows(setup, t_fail, h),
-                                   (setup, Zrec[kept - 1], Trec[kept - 1]))
+                                   (setup, state))
     raise RunError(traj.failure, t_fail, done, traj)
 
 
@@ -307,30 +313,56 @@ def _exact_overflows(setup, t, h):
     return not np.all(np.abs(z) < 1e300)
 
 
-def local_rate(setup, Z, t0, t1, samples=9):
-    """The flow's fastest local rate at the states Z ((N, 2n) or one state) over the times from t0
-    to t1: the largest |eigenvalue| of the Jacobian of (dq/dt, dp/dt) in (q, p), by central
-    differences, at `samples` times (a drive may turn within a step). NaN where it is not
-    finite. A Newton solve of an implicit step is sure to converge from the step's start when h
-    times it is well below 1: at h |lambda| > 1 the implicit equations may have no solution near
-    the state, or several, and a smaller h that is not yet small enough can fail sooner (kapitza's
-    midpoint at a = 0.3: 0.5 fails in step 46, 0.1 in step 3, 0.05 not at all)."""
+def _reach(D):
+    """How far an implicit step of family data D reaches, in units of h times the flow's rate: the
+    weight of the new state where H is evaluated (theta: the larger of q's and p's; midpoint 1/2),
+    half the longest sub-step of a midpoint composition (composition6's 2.30 h: 1.15), the largest
+    row sum of |A| of a Gauss tableau (0.79, 0.89); 1 for any other family."""
+    if isinstance(D, Theta):
+        return max(D.wq1, D.wp1)
+    if isinstance(D, Composition):
+        return 0.5 * max(abs(g) for g in D.gammas)
+    if isinstance(D, Gauss):
+        s = len(D.b)
+        return max(sum(abs(D.A[i * s + j]) for j in range(s)) for i in range(s))
+    return 1.0
+
+
+def _below(x):
+    """x rounded down to two significant figures."""
+    unit = 10.0 ** (math.floor(math.log10(x)) - 1)
+    return math.floor(x / unit) * unit
+
+
+def local_rate(setup, Z, t, h, samples=9):
+    """The flow's fastest local rate over the step of h from the states Z ((N, 2n) or one state)
+    at t: the largest |eigenvalue| of the Jacobian of (dq/dt, dp/dt) in (q, p), by central
+    differences, at `samples` states of each explicit Euler step z + s h f(z, t), s in [0, 1] (the
+    region a step's Newton searches), each at `samples` times across the step (a fast drive may
+    turn within it). NaN where it is
+    not finite. Where h times the rate and the method's reach (_reach) passes 1/2 or so, the
+    implicit equations of a step may have no solution near the state, or several, that Newton
+    from the state misses, and a smaller h that is not yet small enough can fail sooner (kapitza's
+    midpoint at a = 0.3: 0.5 fails in step 46, 0.1 in step 3, 0.045 not at all). A guide, not a
+    bound: the eigenvalues of a non-normal Jacobian do not bound the Newton map."""
     m = 2 * setup.scene.ndof
     Z = np.array(Z, dtype=float).reshape(-1, m)
-    if not np.all(np.isfinite(Z)):
-        return math.nan
     J = np.empty((m, m))
-    plus, minus = np.empty(m + 1), np.empty(m + 1)
+    f, plus, minus = np.empty(m + 1), np.empty(m + 1), np.empty(m + 1)
     rate = 0.0
-    for z in Z:
-        for s in np.linspace(t0, t1, samples):
+    for z0 in Z:
+        vector_field(setup.P, t, z0, f)
+        for s, u in itertools.product(np.linspace(0.0, 1.0, samples), repeat=2):
+            z = z0 + s * h * f[:m]
+            if not np.all(np.isfinite(z)):
+                return math.nan
             for j in range(m):
                 d = 1e-6 * max(1.0, abs(z[j]))
                 up, down = z.copy(), z.copy()
                 up[j] += d
                 down[j] -= d
-                vector_field(setup.P, s, up, plus)
-                vector_field(setup.P, s, down, minus)
+                vector_field(setup.P, t + u * h, up, plus)
+                vector_field(setup.P, t + u * h, down, minus)
                 J[:, j] = (plus[:m] - minus[:m]) / (2 * d)
             if not np.all(np.isfinite(J)):
                 return math.nan
@@ -339,10 +371,11 @@ def local_rate(setup, Z, t0, t1, samples=9):
 
 
 def failure_message(status, step, t, h, exact_overflows=False, at=None):
-    """The message of a run that stopped in `step` (from t) with `status`. at = (setup, Z, t_Z): the
-    run's states at t_Z <= t (the last record, or the members where they stopped): for a Newton
-    failure, the flow's fastest local rate at them from t_Z to the step's end (local_rate, eight
-    times a step, at most 65) says how far to reduce h."""
+    """The message of a run that stopped in `step` (from t) with `status`. at = (setup, Z): the
+    run's states at the failing step's start (or, in an ensemble, one step on for the members before
+    the failing one): for a Newton failure, the flow's fastest local rate over the step from them
+    (local_rate) gives an h to try, 1 / (2 rate reach) rounded down, which ran 'Kapitza: Newton
+    fails' to T = 100 with every implicit method (tests/test_hard_cases.py)."""
     where = f"in step {step + 1} (from t = {t:.6g})"
     if status == OVERFLOW and exact_overflows:
         return (f"overflow {where}: the state left floating-point range (|z| > 1.8e308), as the exact solution "
@@ -352,14 +385,14 @@ def failure_message(status, step, t, h, exact_overflows=False, at=None):
                 f"or reduce h if the solution should stay bounded")
     if status in (NEWTON, SINGULAR):
         what = "Newton did not converge" if status == NEWTON else "singular Newton matrix"
-        if at is None:
-            rate = math.nan
-        else:
-            setup, Z, t_Z = at
-            rate = local_rate(setup, Z, t_Z, t + h, min(65, 8 * round((t + h - t_Z) / h) + 1))
-        if h * rate > 1.0:
-            return (f"{what} {where}: the flow's fastest local rate there is {rate:.3g}, h times it {h * rate:.2g}; "
-                    f"take h below {1.0 / rate:.2g} (h x rate < 1), where the step's equations have one solution "
-                    f"near the state (above that, a smaller h can fail sooner)")
+        if at is not None:
+            setup, Z = at
+            rate = local_rate(setup, Z, t, h)
+            reach = rate * _reach(setup.data)
+            guide = _below(0.5 / reach) if 0.0 < reach < math.inf else math.inf
+            if guide < h:
+                return (f"{what} {where}: the flow's fastest local rate there is {rate:.3g} (h times it "
+                        f"{h * rate:.3g}); try h below {guide:.2g}, where the step's equations should have one "
+                        f"solution near the state (a guide, not a bound; above it a smaller h can fail sooner)")
         return f"{what} {where}: reduce h"
     return f"run failed {where}"

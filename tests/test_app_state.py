@@ -704,7 +704,7 @@ def test_a_failing_run_shows_its_data_up_to_the_failure_time():
     s = Study(scene="kapitza", values={"q0": 1.0})
     s.h = 0.3
     entry = s.results.entries[0]
-    assert "Newton" in entry.failure and "take h below" in entry.failure
+    assert "Newton" in entry.failure and "try h below" in entry.failure
     assert s.message.level == "warning" and "showing data up to t = 0.3" in s.message.text
     assert entry.comparison.run.t[-1] == pytest.approx(0.3)
     rk4 = s.results.entries[1]

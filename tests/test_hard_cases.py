@@ -326,30 +326,39 @@ def test_newton_on_kapitza_converges_to_round_off_at_large_steps(h):
 
 
 def kapitza_rate(s, z, t, h):
-    """Kapitza's fastest local rate over the step from (z, t), in closed form: the Jacobian of
-    (p, -g(t) sin q) is [[0, 1], [-g cos q, 0]], eigenvalues +-sqrt(-g cos q), at local_rate's times."""
+    """Kapitza's fastest local rate over the step of h from (z, t), in closed form: the Jacobian of
+    (p, -g(t) sin q) is [[0, 1], [-g cos q, 0]], eigenvalues +-sqrt(-g cos q), at local_rate's
+    points: q along the explicit Euler step (q + s h p), each at nine times across the step."""
     P = s.P
-    g = P.w0 ** 2 - P.a * P.nu ** 2 * np.cos(P.nu * np.linspace(t, t + h, 9))
-    return float(np.max(np.sqrt(np.abs(g * np.cos(z[0])))))
+    q = z[0] + np.linspace(0.0, 1.0, 9)[:, None] * h * z[1]
+    g = P.w0 ** 2 - P.a * P.nu ** 2 * np.cos(P.nu * np.linspace(t, t + h, 9))[None, :]
+    return float(np.max(np.sqrt(np.abs(g * np.cos(q)))))
 
 
-def test_newton_failure_on_kapitza_says_how_far_to_reduce_h():
-    """At h = 0.5 with a strong drive (a = 0.3, nu = 40) the midpoint equations have no nearby
+@pytest.mark.parametrize("name", ["midpoint", "theta-naive", "gauss4", "gauss6", "composition4", "composition6"])
+def test_newton_failure_on_kapitza_says_how_far_to_reduce_h(name):
+    """At h = 0.5 with a strong drive (a = 0.3, nu = 40) the implicit equations have no nearby
     solution: the run stops at the first such step, every step before it a converged one. 'Reduce h'
-    alone misled there: 0.4, 0.3, 0.2 and 0.1 fail sooner (steps 31, 8, 8, 3). The message gives the
-    flow's local rate at the failing state (Kapitza's closed form), and an h below 1 / rate, which
-    runs the whole horizon."""
-    s = setup("kapitza", "midpoint", a=0.3, nu=40.0, q0=3.0)
+    alone misled there: midpoint at 0.4, 0.3, 0.2 and 0.1 fails sooner (steps 31, 8, 8, 3). The message
+    gives the flow's local rate over the failing step (for midpoint, against Kapitza's closed form)
+    and an h to try, scaled by how far the method's implicit stages reach (composition6's sub-steps
+    of up to 2.3 h: about half of midpoint's): that h runs the whole horizon."""
+    s = setup("kapitza", name, a=0.3, nu=40.0, q0=3.0)
     with pytest.raises(RunError) as info:
-        simulate(s, 0.5, 100.0)
+        simulate(s, 0.5, 100.0, stride=7)
     err = info.value
     part = err.partial
-    assert part.steps == err.step and np.all(np.isfinite(part.z))
-    rate = kapitza_rate(s, part.z[-1, 0], err.time, 0.5)
-    assert local_rate(s, part.z[-1, 0], err.time, err.time + 0.5) == pytest.approx(rate, rel=1e-6)
-    assert f"Newton did not converge in step {err.step + 1}" in str(err)
-    assert f"fastest local rate there is {rate:.3g}, h times it {0.5 * rate:.2g}; take h below {1 / rate:.2g}" in str(err)
-    below = float(str(err).split("take h below ")[1].split()[0])
+    assert part.steps == err.step and np.all(np.isfinite(part.z)) and part.t[-1] < err.time
+    assert f"Newton did not converge in step {err.step + 1} (from t = {err.time:.6g}): the flow's fastest " in str(err)
+    rate = float(str(err).split("local rate there is ")[1].split()[0])
+    if name == "midpoint":  # the state at the failing step's start, from the record 1-6 steps before it
+        start = simulate(s, 0.5, err.time).z[-1, 0]
+        assert rate == float(f"{kapitza_rate(s, start, err.time, 0.5):.3g}")
+        assert local_rate(s, start, err.time, 0.5) == pytest.approx(kapitza_rate(s, start, err.time, 0.5), rel=1e-6)
+    times = float(str(err).split("(h times it ")[1].split(")")[0])
+    assert times == pytest.approx(0.5 * rate, rel=5e-3) and "); try h below " in str(err)
+    below = float(str(err).split("try h below ")[1].split(",")[0])
+    assert below <= (0.5 if name == "composition6" else 1.0) / rate
     run = simulate(s, below, 100.0)
     assert run.t[-1] >= 100.0 and np.all(np.isfinite(run.z))
 
