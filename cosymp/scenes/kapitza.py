@@ -98,7 +98,8 @@ SCENE = Scene(
              "midpoint", "rk4", 0.1, 20.0, values={"q0": 3.0, "a": 0.1, "nu": 40.0}, hard=True),
         Case("Kapitza: Newton fails",
              "a = 0.3 at h = 0.5: the midpoint equations have no nearby solution; the message names "
-             "the step and the data up to it stay.",
+             "the step, the flow's local rate there and an h to try (h = 0.4, 0.3 or 0.1 fail sooner), and the "
+             "data up to it stay.",
              "midpoint", "rk4", 0.5, 100.0, values={"q0": 3.0, "a": 0.3, "nu": 40.0}, hard=True, fails=("midpoint",)),
     ),
     map_axes=(("nu", 5.0, 80.0, False), ("a", 0.0, 0.5, False)),
