@@ -392,8 +392,7 @@ def failure_message(status, step, t, h, exact_overflows=False, at=None):
             reach = rate * _reach(setup.data)
             guide = _below(0.5 / reach) if 0.0 < reach < math.inf else math.inf
             if guide < h:
-                return (f"{what} {where}: the flow's fastest local rate there is {rate:.3g} (h times it "
-                        f"{h * rate:.3g}); try h below {guide:.2g}, where the step's equations should have one "
-                        f"solution near the state (a guide, not a bound; above it a smaller h can fail sooner)")
+                return (f"{what} {where}: the flow's local rate there is {rate:.3g}, h times it {h * rate:.3g}; "
+                        f"try h below {guide:.2g} (a guide; a smaller h above it can fail sooner)")
         return f"{what} {where}: reduce h"
     return f"run failed {where}"
