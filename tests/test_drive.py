@@ -188,6 +188,8 @@ def test_a_nonlinear_ensemble_fails_where_its_first_member_fails():
     err = info.value
     head = f"Newton did not converge in step {first.step + 1} (from t = {first.time:.6g}): the flow's local rate"
     assert str(err).startswith(head) and str(first).startswith(head) and err.step == first.step > 0
+    advice = [str(e).split("; try h below ")[1] for e in (err, first)]
+    assert advice[0] == advice[1], "members 1e-2 apart: the same h to try, to the two figures given"
     part = err.partial
     assert len(part.t) == first.step // 2 + 1
     for i, e in enumerate(own):
