@@ -497,17 +497,27 @@ SENDS_JS = """() => {
   const {Message} = Bokeh.require("protocol/message");
   const {Document} = Bokeh.require("document");
   const {Slider, Button} = Bokeh.require("models/widgets");
+  const {DataRange1d, Range1d} = Bokeh.require("models/ranges");
   const doc = new Document();
   const slider = new Slider({start: 0, end: 10, value: 0, step: 1});
   const button = new Button({subscribed_events: new Set(["button_click"])});  // as a button with a handler
+  const auto = new DataRange1d(), fixed = new Range1d({start: 0, end: 1});
   doc.add_root(slider);
   doc.add_root(button);
+  doc.add_root(auto);
+  doc.add_root(fixed);
   const sent = [];
   const session = new ClientSession({send: (m) => sent.push(m)}, doc);
   const events = (m) => m.content.events.map((e) => e.kind === "ModelChanged" ? `${e.attr}=${e.new}` : e.kind);
   const reply = (type, m, content) => session.handle(new Message({msgtype: type, msgid: `r${m.msgid()}`, reqid: m.msgid()},
                                                                  {}, content));
   const ok = (m) => reply("OK", m, {});
+  auto.setv({start: -1, end: 1});  // an auto range's bounds from new data: not sent
+  const bounds = sent.length;
+  fixed.start = -2;  // another range's: sent, as BokehJS sends it
+  const other = sent.map(events);
+  ok(sent[0]);
+  sent.length = 0;
   slider.value = 1;
   slider.value = 2;
   slider.value_throttled = 2;
@@ -522,17 +532,19 @@ SENDS_JS = """() => {
   slider.value = 6;
   const third = sent.length;
   reply("ERROR", sent[1], {text: "refused"});
-  return {before, second, third, after: sent.length, messages: sent.map(events)};
+  return {bounds, other, before, second, third, after: sent.length, messages: sent.map(events)};
 }"""
 
 
 def test_a_burst_of_changes_goes_as_one_message_per_answer_in_order_with_superseded_values_left_out(page):
     """app/static/bokeh_sends.js: the first change goes at once; what changes before the server
     answers goes in one message when it does, each property's last value only, but never across a
-    click (its handler must see the values set before it); an ERROR answer counts as an answer."""
+    click (its handler must see the values set before it); an ERROR answer counts as an answer. An
+    auto range's bounds are not sent; another range's are."""
     page.open()
     page.page.wait_for_selector(TABLE_ROW)
     out = page.page.evaluate(SENDS_JS)
+    assert out["bounds"] == 0 and out["other"] == [["start=-2"]], out
     assert out["before"] == 1 and out["second"] == 2 and out["third"] == 2 and out["after"] == 3, out
     assert out["messages"] == [["value=1"], ["value_throttled=2", "value=3", "MessageSent", "value=5"], ["value=6"]]
     assert [e for e in page.errors if "refused" in e] == [page.errors.pop()], "BokehJS logs the ERROR answer, as before"
