@@ -137,9 +137,9 @@ class Drive:
     def _stopped(self, status, in_tangent):
         """The message of the failure that stopped the run in the step from self.t (the members'
         states in Z: there, or one step on for those before the failing one). A tangent map is
-        formed before its step, by the step itself in complex arithmetic (kernels.survey._tangent):
-        where its Newton fails and the step's own Newton fails too, the failure is the step's, and
-        is named so (near h times the flow's rate = 2 one may converge and the other not)."""
+        formed before its step, by the step itself in complex arithmetic (kernels.survey._tangent)
+        from the real step's solution (kernels.families.theta_start): where it fails, the step's
+        own Newton has failed, and the failure is named the step's."""
         s = self.setup
         step = round(self.t0 / self.h) + self.done
         if in_tangent:

@@ -20,8 +20,11 @@ from collections import namedtuple
 
 import numpy as np
 from numba import njit
+from numba.core import types
+from numba.extending import overload
 
 from .dispatch import (
+    _IR_INLINE,
     INLINE,
     IR_INLINE,
     bfield,
@@ -116,14 +119,100 @@ def _newton_done(dz, ndz, z, nz, prev):
     return corr <= NEWTON_TOL * size or (corr <= 1e-10 * size and corr >= 0.5 * prev), corr
 
 
+def newton_update(x, dx):
+    """x + dx, Newton's correction; in complex arithmetic (a tangent map's complex step, which
+    starts from the real step's solution: theta_start, gauss_start) the imaginary part alone, so
+    that the real part stays the real step's own and the imaginary part solves its linearization
+    there."""
+
+
+@overload(newton_update, jit_options=_IR_INLINE, inline="always")
+def _newton_update(x, dx):
+    if isinstance(x, types.Complex):
+        return lambda x, dx: complex(x.real, x.imag + dx.imag)
+    return lambda x, dx: x + dx
+
+
+def theta_start(P, C, j, h, wq0, wq1, wp0, wp1, z, z1):
+    """Newton's start z1 for theta_core from z, and a status: z itself; in complex arithmetic
+    the real step's solution from Re z (its status if it fails). A complex step cold from z
+    iterated its real part with other roundings than the real step (products contracted
+    otherwise): where Newton converges only barely (h times the flow's rate about 3-10 on
+    kapitza), one converged and the other not, or to another root, and a fused run stopped at a
+    tangent map whose step converges (17 of 207 kapitza runs of midpoint, theta and gauss4,
+    q0 in 1-3, h in 0.05-0.6, 60 time units). From the real root, one iteration solves for the
+    imaginary part: the derivative of the root the step took."""
+
+
+@overload(theta_start, jit_options=_IR_INLINE, inline="always")
+def _theta_start(P, C, j, h, wq0, wq1, wp0, wp1, z, z1):
+    if not isinstance(z.dtype, types.Complex):
+        def cold(P, C, j, h, wq0, wq1, wp0, wp1, z, z1):
+            for i in range(z.shape[0]):
+                z1[i] = z[i]
+            return OK
+        return cold
+
+    def warm(P, C, j, h, wq0, wq1, wp0, wp1, z, z1):
+        V = vectors(P, 5, 0.0)
+        MM = matrices(P, 2, 0.0)
+        zr = V[4]
+        for i in range(z.shape[0]):
+            zr[i] = z[i].real
+            V[0, i] = zr[i]
+        status, _ = theta_newton(P, C, j, h, wq0, wq1, wp0, wp1, zr, 0.0, V, MM[0], MM[1])
+        for i in range(z.shape[0]):
+            z1[i] = zr[i]
+        return status
+    return warm
+
+
+def gauss_start(D, P, C, t, h, z, Zs):
+    """The Gauss stages' Newton start from z, and a status: z in every stage; in complex
+    arithmetic the real step's stages from Re z (theta_start says why)."""
+
+
+@overload(gauss_start, jit_options=_IR_INLINE, inline="always")
+def _gauss_start(D, P, C, t, h, z, Zs):
+    if not isinstance(z.dtype, types.Complex):
+        def cold(D, P, C, t, h, z, Zs):
+            for i in range(len(D.b)):
+                for r in range(z.shape[0]):
+                    Zs[i, r] = z[r]
+            return OK
+        return cold
+
+    def warm(D, P, C, t, h, z, Zs):
+        W = gauss_work(D, P, 0.0)
+        zr = vectors(P, 1, 0.0)[0]
+        for r in range(z.shape[0]):
+            zr[r] = z[r].real
+        for i in range(len(D.b)):
+            for r in range(z.shape[0]):
+                W[0][i, r] = zr[r]
+        status, _ = gauss_newton(D, P, C, t, h, zr, 0.0, W)
+        for i in range(len(D.b)):
+            for r in range(z.shape[0]):
+                Zs[i, r] = W[0][i, r]
+        return status
+    return warm
+
+
 @njit(**INLINE)
 def theta_core(P, C, j, h, wq0, wq1, wp0, wp1, z, pt, V, Hm, Jm):
     """Solve q1 - q = h H_p(Z), p1 - p = -h H_q(Z) with Z the weighted point, by Newton."""
+    status = theta_start(P, C, j, h, wq0, wq1, wp0, wp1, z, V[0])
+    if status != OK:
+        return status, pt
+    return theta_newton(P, C, j, h, wq0, wq1, wp0, wp1, z, pt, V, Hm, Jm)
+
+
+@njit(**INLINE)
+def theta_newton(P, C, j, h, wq0, wq1, wp0, wp1, z, pt, V, Hm, Jm):
+    """theta_core's Newton iteration from its start V[0]."""
     n = ndof(P)
     m = 2 * n
     z1, Zt, g, F = V[0], V[1], V[2], V[3]
-    for i in range(m):
-        z1[i] = z[i]
     prev = np.inf
     status = NEWTON
     for it in range(NEWTON_MAX):
@@ -146,7 +235,7 @@ def theta_core(P, C, j, h, wq0, wq1, wp0, wp1, z, pt, V, Hm, Jm):
             status = SINGULAR
             break
         for i in range(m):
-            z1[i] += F[i]
+            z1[i] = newton_update(z1[i], F[i])
         done, prev = _newton_done(F, m, z1, m, prev)
         if done or is_linear(P):
             status = OK
@@ -276,7 +365,7 @@ def _gauss_correct(D, P, Zs, F, Jm, piv):
     substitute(Jm, piv, F, s * m, 1)
     for i in range(s):
         for r in range(m):
-            Zs[i, r] += F[i * m + r]
+            Zs[i, r] = newton_update(Zs[i, r], F[i * m + r])
 
 
 @njit(**INLINE)
@@ -288,14 +377,20 @@ def gauss_step(D, P, C, t, h, z, pt, W):
     drifted (gauss6 on damped, gamma = 2e-4, h = 0.1, 2e6 steps from 16 nearby starts: the mean of
     H + p_t at the end -4.8e-13, 12.8 standard errors from 0). A second step with the same factors,
     from the residual, refines the stages (mean -2.3e-14, 0.5 standard errors; README, round-off)."""
+    status = gauss_start(D, P, C, t, h, z, W[0])
+    if status != OK:
+        return status, pt
+    return gauss_newton(D, P, C, t, h, z, pt, W)
+
+
+@njit(**INLINE)
+def gauss_newton(D, P, C, t, h, z, pt, W):
+    """gauss_step's Newton iteration from its start, the stages W[0]."""
     Zs, Fs, V, F, Hm, Jm, piv = W
     y, g = V[0], V[1]
     n = ndof(P)
     m = 2 * n
     s = len(D.b)
-    for i in range(s):
-        for r in range(m):
-            Zs[i, r] = z[r]
     if is_linear(P):
         _gauss_residual(D, P, C, h, z, Zs, Fs, F, y, g)
         status = SINGULAR
