@@ -46,7 +46,7 @@ from .dispatch import (
     vecpot,
 )
 from .linalg import factor, solve, substitute
-from .stack import matrices, stage_flat, stage_pivots, stage_square, stage_vectors, vectors
+from .stack import matrices, stage_flat, stage_pivots, stage_square, stage_unknowns, stage_vectors, vectors
 
 OK, OVERFLOW, NEWTON, SINGULAR = 0, 1, 2, 3
 START = -1  # H is not finite at the start: no step taken
@@ -352,7 +352,7 @@ def _gauss_newton(D, P, C, h, Zs, F, y, Hm, Jm, piv):
                     Jm[i * m + n + r, j * m + c] = a * Hm[r, c]
     for r in range(s * m):
         Jm[r, r] += 1.0
-    if not factor(Jm, piv, s * m):
+    if not factor(Jm, piv, stage_unknowns(D, P)):
         return False
     _gauss_correct(D, P, Zs, F, Jm, piv)
     return True
@@ -362,7 +362,7 @@ def _gauss_newton(D, P, C, h, Zs, F, y, Hm, Jm, piv):
 def _gauss_correct(D, P, Zs, F, Jm, piv):
     m = 2 * ndof(P)
     s = len(D.b)
-    substitute(Jm, piv, F, s * m, 1)
+    substitute(Jm, piv, F, stage_unknowns(D, P), 1)
     for i in range(s):
         for r in range(m):
             Zs[i, r] = newton_update(Zs[i, r], F[i * m + r])

@@ -14,7 +14,7 @@ from numba import njit
 from .dispatch import INLINE, IR_INLINE, flow, ndof, step
 from .families import boris_core, stage_row
 from .linalg import solve
-from .stack import matrices, stage_matrices, stage_square, vectors
+from .stack import matrices, stage_matrices, stage_square, stage_unknowns, vectors
 
 
 @njit(**INLINE)
@@ -156,7 +156,7 @@ def gauss_lmatrix(D, P, C, t, h, M, Q, W):
     for r in range(s * m):
         for c in range(m):
             Gs[r, c] = 1.0 if r % m == c else 0.0
-    solve(Big, Gs, s * m, m)
+    solve(Big, Gs, stage_unknowns(D, P), m)
     identity(M, m)
     for i in range(Q.shape[0]):
         for c in range(m):
