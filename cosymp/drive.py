@@ -138,8 +138,9 @@ class Drive:
         """The message of the failure that stopped the run in the step from self.t (the members'
         states in Z: there, or one step on for those before the failing one). A tangent map is
         formed before its step, by the step itself in complex arithmetic (kernels.survey._tangent)
-        from the real step's solution (kernels.families.theta_start): where it fails, the step's
-        own Newton has failed, and the failure is named the step's."""
+        from the real step's solution (kernels.families.theta_start), so in practice it fails
+        only where the step's own Newton fails. One real step from the same state decides: the
+        failure is named the step's where that step fails too, the tangent map's where it runs."""
         s = self.setup
         step = round(self.t0 / self.h) + self.done
         if in_tangent:

@@ -364,9 +364,10 @@ def test_newton_failure_on_kapitza_says_how_far_to_reduce_h(name):
     assert run.t[-1] >= 100.0 and np.all(np.isfinite(run.z))
 
 
-@pytest.mark.parametrize("method, q0, h", [("midpoint", 1.0, 0.125), ("midpoint", 1.0, 0.3), ("midpoint", 3.0, 0.09),
-                                          ("gauss4", 2.0, 0.15), ("gauss4", 3.0, 0.5)])
-def test_a_tangent_map_converges_wherever_its_step_does(method, q0, h):
+@pytest.mark.parametrize("method, params, h", [("midpoint", {"q0": 1.0}, 0.125), ("midpoint", {"q0": 1.0}, 0.3),
+                                              ("midpoint", {"q0": 3.0, "a": 0.3, "nu": 40.0}, 0.09),
+                                              ("gauss4", {"q0": 2.0}, 0.15), ("gauss4", {"q0": 3.0}, 0.5)])
+def test_a_tangent_map_converges_wherever_its_step_does(method, params, h):
     """A tangent map's complex step starts its Newton from the real step's solution
     (kernels.families.theta_start, gauss_start). Started from the state, its real part rounded
     otherwise than the real step's and, where Newton converges only barely (h times the flow's
@@ -374,16 +375,18 @@ def test_a_tangent_map_converges_wherever_its_step_does(method, q0, h):
     tangent map (midpoint at q0 = 3, h = 0.09 in step 265) that simulate stepped past (which ones
     depends on how the compiler contracts the products). Now a map fails only where its own step
     does, and that failure is named the step's."""
-    s = setup("kapitza", method, q0=q0, **({"a": 0.3, "nu": 40.0} if h == 0.09 else {}))
+    s = setup("kapitza", method, **params)
     n = round(60 / h)
     drive = Drive(s, h, every=1)
     drive.run(n, strict=False)
-    assert drive.done == n or drive.failure.startswith("Newton did not converge in step ")
+    assert drive.done == n or drive.failure.startswith(("Newton did not converge in step ", "singular Newton matrix in step "))
 
 
 def test_a_tangent_map_where_newton_barely_converges_is_the_derivative_of_the_step_taken():
     """Midpoint on kapitza at h = 0.125 (h times the flow's rate about 2.7): each step's map, by
-    complex step from the real step's root, against central differences of the step itself."""
+    complex step from the real step's root, against central differences of the step itself. A
+    check that the map is the step's derivative, to the differences' accuracy (1e-6 of its size);
+    its determinant, 1 for midpoint, to round-off."""
     s = setup("kapitza", "midpoint", q0=1.0)
     traj = simulate(s, 0.125, 2.5)
     M = tangent_maps(traj)

@@ -107,16 +107,31 @@ def stage_row(D, i):
     return 0 if len(D.offsets) == 1 else D.stage[i]
 
 
-@njit(**IR_INLINE)
+def newton_done(dz, ndz, z, nz, prev):
+    """Whether Newton has converged, and the size of its correction dz: to round-off, a small
+    correction or one that stopped shrinking near the floor. In complex arithmetic (a tangent
+    map's complex step) after the first correction: the real part is the real step's root, kept
+    by newton_update, so the real correction, which is never applied, measures that root's
+    round-off and a root the real step accepted near the floor could repeat it above the
+    tolerance on every pass, to NEWTON_MAX; and the imaginary part solves a linear system (the
+    step's linearization at that root; COMPLEX_STEP's square is far below round-off), which one
+    correction solves."""
+
+
+@overload(newton_done, jit_options=_IR_INLINE, inline="always")
 def _newton_done(dz, ndz, z, nz, prev):
-    """Converged to round-off: a small correction, or one that stopped shrinking near the floor."""
-    size = 1.0
-    for i in range(nz):
-        size = max(size, abs(z[i]))
-    corr = 0.0
-    for i in range(ndz):
-        corr = max(corr, abs(dz[i]))
-    return corr <= NEWTON_TOL * size or (corr <= 1e-10 * size and corr >= 0.5 * prev), corr
+    if isinstance(z.dtype, types.Complex):
+        return lambda dz, ndz, z, nz, prev: (True, 0.0)
+
+    def converged(dz, ndz, z, nz, prev):
+        size = 1.0
+        for i in range(nz):
+            size = max(size, abs(z[i]))
+        corr = 0.0
+        for i in range(ndz):
+            corr = max(corr, abs(dz[i]))
+        return corr <= NEWTON_TOL * size or (corr <= 1e-10 * size and corr >= 0.5 * prev), corr
+    return converged
 
 
 def newton_update(x, dx):
@@ -236,7 +251,7 @@ def theta_newton(P, C, j, h, wq0, wq1, wp0, wp1, z, pt, V, Hm, Jm):
             break
         for i in range(m):
             z1[i] = newton_update(z1[i], F[i])
-        done, prev = _newton_done(F, m, z1, m, prev)
+        done, prev = newton_done(F, m, z1, m, prev)
         if done or is_linear(P):
             status = OK
             break
@@ -406,7 +421,7 @@ def gauss_newton(D, P, C, t, h, z, pt, W):
             if not _gauss_newton(D, P, C, h, Zs, F, y, Hm, Jm, piv):
                 status = SINGULAR
                 break
-            done, prev = _newton_done(F, s * m, z, m, prev)
+            done, prev = newton_done(F, s * m, z, m, prev)
             if done:
                 status = OK
                 break

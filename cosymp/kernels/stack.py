@@ -101,9 +101,10 @@ def stage_unknowns(D, P):
     """The unknowns of the Gauss stages' system, stages x 2n: the size its factorization and
     solves loop over. A constant up to UNROLLED_MAX, by which the compiler unrolls those loops;
     beyond it hidden from the optimizer, so that they stay loops. Unrolled, the charged particle's
-    gauss6 system (12 x 12) made its step matrix 1.66x its C mirror (1333 against 802 ns a step)
-    and its member step 1419 ns; as loops 1.06x and 964 ns. gauss4's 8 x 8 runs faster unrolled
-    (its step matrix 303 against 413 ns as loops)."""
+    gauss6 system (12 x 12) made its step matrix 1.70x its C mirror (1348 against 792 ns a step)
+    and its member step 1419 ns; as loops 1.07x and 967 ns. gauss4's 8 x 8 runs faster unrolled
+    (its step matrix 303 against 413 ns as loops). D's stages must be a tuple: the bound
+    MAX_STAGES of an array tableau would size the system wrong."""
 
 
 def stage_pivots(D, P):
@@ -158,6 +159,8 @@ def _stage_square(D, P, like):
 
 @overload(stage_unknowns, jit_options=_IR_INLINE, inline="always")
 def _stage_unknowns(D, P):
+    if not isinstance(D.types[D.fields.index("b")], types.BaseTuple):
+        raise TypingError("stage_unknowns: the tableau's weights b must be a tuple")
     sm = 2 * _scene(P).ndof * _stages(D)
     if sm > UNROLLED_MAX:
         return lambda D, P: _opaque(np.int64(sm))
