@@ -29,7 +29,8 @@ from . import graph, messages, properties
 REBOOT = "app/static/bootstrap_reboot.css"  # Bootstrap's Reboot section, verbatim (see Design)
 # BokehJS and Panel's views adjusted in the page (served from app/static by the server; see each file).
 SCRIPTS = {"cosymp_bokeh_reads": "app/static/bokeh_reads.js", "cosymp_bokeh_layouts": "app/static/bokeh_layouts.js",
-           "cosymp_bokeh_sends": "app/static/bokeh_sends.js", "cosymp_panel_katex": "app/static/panel_katex.js"}
+           "cosymp_bokeh_sends": "app/static/bokeh_sends.js", "cosymp_bokeh_quiet": "app/static/bokeh_quiet.js",
+           "cosymp_panel_katex": "app/static/panel_katex.js"}
 
 
 class Design(Bootstrap):

@@ -81,7 +81,7 @@ URL_QUIET_MS = 1000  # the app writes a change into the URL 250 ms after it (app
 
 
 class Page:
-    """A browser page that records requests and console errors."""
+    """A browser page that records requests, console errors and BokehJS's warnings."""
 
     def __init__(self, browser, base):
         self.base = base
@@ -92,6 +92,9 @@ class Page:
         self.page.on("request", lambda r: self.requests.append(r.url))
         self.page.on("console", lambda m: m.type == "error" and self.errors.append(m.text))
         self.page.on("pageerror", lambda e: self.errors.append(str(e)))
+        # BokehJS's own warnings (app/static/bokeh_quiet.js keeps figures without data quiet)
+        self.page.on("console", lambda m: m.type == "warning" and "[bokeh" in m.text and self.warnings.append(m.text))
+        self.warnings = []
 
     def open(self, query=""):
         self.page.goto(self.base + query, wait_until="load")
@@ -112,6 +115,7 @@ class Page:
         outside = [u for u in self.requests if not u.startswith(local)]
         assert outside == [], outside
         assert self.errors == [], self.errors
+        assert self.warnings == [], self.warnings
 
     def numbers(self):
         """The numbers table's rows (lists of cell texts), without its wall-time rows."""

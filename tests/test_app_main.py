@@ -87,6 +87,31 @@ def test_the_bokeh_reads_shim_still_matches_bokehjs_and_no_css_sets_bk_variables
     assert all((root / path).is_file() for path in page.SCRIPTS.values())
 
 
+def test_the_quiet_shim_still_matches_bokehjs():
+    """app/static/bokeh_quiet.js keeps figures without data from warning: it turns the range
+    manager's warning off after PlotView.initialize made it (as BokehJS's InternalPlotView does), and
+    gives DataRange1d._compute_range of a log axis with no finite data BokehJS's own 0.1 ... 10. When a
+    Bokeh release changes either, this says so. (tests/served.py fails an e2e test on any BokehJS
+    warning.)"""
+    import re
+    from pathlib import Path
+
+    import bokeh
+
+    js = (Path(bokeh.__file__).parent / "server" / "static" / "js" / "bokeh.js").read_text()
+    assert re.search(r"initialize\(\) \{\s*super\.initialize\(\);\s*this\._range_manager\.warn_initial_ranges = false;",
+                     js), "BokehJS's internal plots no longer turn the warning off this way: revisit bokeh_quiet.js"
+    assert "this._range_manager = new range_manager_1.RangeManager(this);" in js
+    assert re.search(r"if \(this\.warn_initial_ranges\) \{\s*logging_1\.logger\.warn\(\"could not set initial ranges\"\);",
+                     js)
+    assert re.search(r"_compute_range\(min, max\) \{(?:(?!\n        \}).)*if \(this\.scale_hint == \"log\"\) \{\s*"
+                     r"if \(isNaN\(min\) \|\| !isFinite\(min\) \|\| min <= 0\) \{\s*"
+                     r"if \(isNaN\(max\) \|\| !isFinite\(max\) \|\| max <= 0\) \{\s*min = 0\.1;", js, re.S), \
+        "DataRange1d takes another log range without data: revisit app/static/bokeh_quiet.js"
+    assert re.search(r"max <= 0\) \{\s*if \(isNaN\(min\) \|\| !isFinite\(min\) \|\| min <= 0\) \{\s*max = 10;", js)
+    assert '"models/plots/plot_canvas":' in js and '"models/ranges/data_range1d":' in js
+
+
 def test_the_equations_get_katexs_stylesheet_and_every_font_it_names():
     """Panel's bundled KaTeX stylesheet names fonts it does not ship, and its LaTeX pane hides
     KaTeX's HTML: the app serves the same KaTeX release's sheet and fonts (app/static/katex) and
