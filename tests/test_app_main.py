@@ -106,7 +106,7 @@ def test_the_quiet_shim_still_matches_bokehjs():
                      js)
     assert re.search(r"_compute_range\(min, max\) \{(?:(?!\n        \}).)*if \(this\.scale_hint == \"log\"\) \{\s*"
                      r"if \(isNaN\(min\) \|\| !isFinite\(min\) \|\| min <= 0\) \{\s*"
-                     r"if \(isNaN\(max\) \|\| !isFinite\(max\) \|\| max <= 0\) \{\s*min = 0\.1;", js, re.S), \
+                     r"if \(isNaN\(max\) \|\| !isFinite\(max\) \|\| max <= 0\) \{\s*min = 0\.1;", js, re.DOTALL), \
         "DataRange1d takes another log range without data: revisit app/static/bokeh_quiet.js"
     assert re.search(r"max <= 0\) \{\s*if \(isNaN\(min\) \|\| !isFinite\(min\) \|\| min <= 0\) \{\s*max = 10;", js)
     assert '"models/plots/plot_canvas":' in js and '"models/ranges/data_range1d":' in js
