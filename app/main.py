@@ -70,8 +70,8 @@ class TopTabs(pn.Tabs):
     map's scroll. The script is a Bokeh callback of the tabs' own model, not Panel's `jscallback`: a
     Panel link on the tabs made every change of their children (a tab built ahead, or joining the
     page at its first visit) walk each of the page's Bokeh models for links to make
-    (panel.links.Callback._process_callbacks): 60 % of the server's time in those changes, 40-70 ms
-    of a first visit's."""
+    (panel.links.Callback._process_callbacks): 3.1 of the 4.7 s Panel spent updating layouts over
+    eight page loads with four first visits each (py-spy), 0.45 s with this."""
 
     def _get_model(self, doc, root=None, parent=None, comm=None):
         model = super()._get_model(doc, root, parent, comm)

@@ -3,10 +3,10 @@
 // Every figure here is built once, before its data (a tab built ahead of its first showing is laid
 // out hidden, with empty sources), and later only gets data. BokehJS warned at each layout of such a
 // figure: "could not set initial ranges" (its range manager, which BokehJS's own internal plots keep
-// quiet the same way) and, for a log axis, "could not determine minimum data value for log axis"
-// (DataRange1d, which then takes 0.1 ... 10, as it does here without the warning). About 130
-// warnings a session, among which a real one would have been lost. A log axis whose data has no
-// positive value but some other finite one still warns, as before.
+// quiet the same way) and, for a log axis, "could not determine minimum (and maximum) data value
+// for log axis" (DataRange1d, which then takes 0.1 ... 10, as it does here without the warnings):
+// 117 warnings in a visit of every tab, among which a real one would have been lost. A log axis
+// whose data has no positive value but some other finite one still warns, as before.
 (function () {
   if (typeof Bokeh === "undefined" || typeof Bokeh.require !== "function") {
     return;
