@@ -71,7 +71,7 @@ class TopTabs(pn.Tabs):
     Panel link on the tabs made every change of their children (a tab built ahead, or joining the
     page at its first visit) walk each of the page's Bokeh models for links to make
     (panel.links.Callback._process_callbacks): 3.1 of the 4.7 s Panel spent updating layouts over
-    eight page loads with four first visits each (py-spy), 0.45 s with this."""
+    eight page loads, each with a first visit (py-spy), 0.45 s with this."""
 
     def _get_model(self, doc, root=None, parent=None, comm=None):
         model = super()._get_model(doc, root, parent, comm)
