@@ -87,6 +87,7 @@ class Page:
         self.base = base
         self.requests = []
         self.errors = []
+        self.warnings = []
         self.page = browser.new_page(viewport={"width": 1400, "height": 2000})
         self.page.set_default_timeout(WAIT_MS)
         self.page.on("request", lambda r: self.requests.append(r.url))
@@ -94,7 +95,6 @@ class Page:
         self.page.on("pageerror", lambda e: self.errors.append(str(e)))
         # BokehJS's own warnings (app/static/bokeh_quiet.js keeps figures without data quiet)
         self.page.on("console", lambda m: m.type == "warning" and "[bokeh" in m.text and self.warnings.append(m.text))
-        self.warnings = []
 
     def open(self, query=""):
         self.page.goto(self.base + query, wait_until="load")
