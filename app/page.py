@@ -25,6 +25,7 @@ from panel.util import parameters
 from tornado.websocket import WebSocketClosedError, WebSocketHandler
 
 from . import graph, messages, properties
+from .memory import Collector
 
 REBOOT = "app/static/bootstrap_reboot.css"  # Bootstrap's Reboot section, verbatim (see Design)
 # BokehJS and Panel's views adjusted in the page (served from app/static by the server; see each file).
@@ -319,6 +320,14 @@ class Spares:
             cls.building.discard(key)
 
 
+def collected_when_idle():
+    """Panel's full garbage collection 5 s after a page's document is destroyed
+    (panel.io.document._garbage_collect), asked of memory.Collector instead, which runs it once the
+    server is idle. Panel ran it then whatever the server was doing: 134-294 ms in which no page was
+    answered, found by the loop's slow-callback log in the middle of a new page's load."""
+    Collector.request()
+
+
 def adjust_panel():
     """Panel's handling of the page's events, for this server process (once; each page runs main.py):
     a change is handled at once, not 50 ms later (Panel waits that long for more changes of the same
@@ -327,7 +336,8 @@ def adjust_panel():
     queued message waits for the next change to be sent, a page that closes while being
     written to leaves no traceback in the log, a page without settings gets a spare session, a
     page's stylesheet addresses are patched from its document's models, Panel makes a component's
-    parameters writable for a moment without touching those that already are, Bokeh's properties
+    parameters writable for a moment without touching those that already are, a closed page's
+    garbage is collected when the server is idle, Bokeh's properties
     compute their per-class constants once (app/properties.py), its messages map the document's
     models without a Python loop over them (app/messages.py) and a document's map of its models follows
     what changed without a walk of the page (app/graph.py)."""
@@ -338,6 +348,7 @@ def adjust_panel():
     Syncable._debounce = 0
     if not getattr(Syncable._change_event, "cosymp", False):
         Syncable._change_event = in_one_message(Syncable._change_event)
+    document._garbage_collect = collected_when_idle
     if not getattr(document._dispatch_msgs, "cosymp", False):
         document._dispatch_msgs = no_stranded_messages(document._dispatch_msgs)
     if not getattr(WebSocketHandler.write_message, "cosymp", False):

@@ -175,6 +175,21 @@ def test_panel_handles_a_change_at_once_and_sends_what_it_causes_in_one_message(
     assert "self._change_event(doc)" in inspect.getsource(Syncable._change_coroutine)
 
 
+def test_a_destroyed_documents_garbage_is_collected_when_the_server_is_idle(monkeypatch):
+    """Panel schedules a full collection 5 s after destroying a page's document, run whatever the
+    server is then doing; page.adjust_panel makes it a request to memory.Collector (which runs it
+    once the server is idle). Panel must still call it by its module's name for that to hold."""
+    from panel.io import document
+
+    page.adjust_panel()
+    assert "state.schedule_task('gc.collect', _garbage_collect" in inspect.getsource(document._destroy_document)
+    monkeypatch.setattr(memory.Collector, "requested", False)
+    collected = []
+    monkeypatch.setattr(memory.gc, "collect", lambda *args: collected.append(args))
+    document._garbage_collect()
+    assert memory.Collector.requested and collected == []
+
+
 def test_the_design_is_computed_once_per_component_class_and_handed_out_as_copies():
     theme = page.Design().theme
     first, _ = page.Design._get_modifiers(pn.widgets.Button(name="x"), theme)
