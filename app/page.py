@@ -19,6 +19,7 @@ from panel.io import document, server
 from panel.io.document import unlocked
 from panel.io.resources import LOCAL_DIST
 from panel.io.state import set_curdoc
+from panel.models.esm import ReactiveESM
 from panel.reactive import Syncable
 from panel.theme import Bootstrap
 from panel.util import parameters
@@ -332,19 +333,23 @@ def adjust_panel():
     """Panel's handling of the page's events, for this server process (once; each page runs main.py):
     a change is handled at once, not 50 ms later (Panel waits that long for more changes of the same
     widget to merge; each computation here merges the changes made while it runs), and what it
-    causes reaches the page in one message. Pages load only the BokehJS bundles they use, no
-    queued message waits for the next change to be sent, a page that closes while being
-    written to leaves no traceback in the log, a page without settings gets a spare session, a
-    page's stylesheet addresses are patched from its document's models, Panel makes a component's
-    parameters writable for a moment without touching those that already are, a closed page's
-    garbage is collected when the server is idle, Bokeh's properties
-    compute their per-class constants once (app/properties.py), its messages map the document's
-    models without a Python loop over them (app/messages.py) and a document's map of its models follows
-    what changed without a walk of the page (app/graph.py)."""
+    causes reaches the page in one message. Pages load only the BokehJS bundles they use (and no
+    polyfill of ES modules), no queued message waits for the next change to be sent, a page that
+    closes while being written to leaves no traceback in the log, a page without settings gets a
+    spare session, a page's stylesheet addresses are patched from its document's models, Panel
+    makes a component's parameters writable for a moment without touching those that already are,
+    a closed page's garbage is collected when the server is idle, Bokeh's properties compute their
+    per-class constants once (app/properties.py), its messages map the document's models without a
+    Python loop over them (app/messages.py) and a document's map of its models follows what changed
+    without a walk of the page (app/graph.py)."""
     properties.install()
     messages.install()
     graph.install()
     Resources._default_components = BOKEH_BUNDLES
+    # Nor the polyfill of Panel's ESM components (es-module-shims), which every page loaded although
+    # none of the app's components is one (tests/test_app_main.py checks): its script and what it did
+    # took 27 ms of the page's main thread before the first plot (CPU profiles, mean of four loads).
+    ReactiveESM.__javascript_raw__ = []
     Syncable._debounce = 0
     if not getattr(Syncable._change_event, "cosymp", False):
         Syncable._change_event = in_one_message(Syncable._change_event)

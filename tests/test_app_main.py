@@ -280,14 +280,20 @@ def test_the_katex_shim_still_matches_panel():
     assert '"base":' in js and re.search(r"function register_models\(models, force = false\)", js)
 
 
-def test_no_model_of_any_tab_needs_the_bokehjs_bundles_the_page_leaves_out():
+def test_no_model_of_any_tab_needs_the_scripts_the_page_leaves_out():
     """app/page.BOKEH_BUNDLES leaves out BokehJS's WebGL and MathJax bundles: no figure of any tab
     draws with WebGL, no text is MathText and no HTML model holds TeX that Panel would give MathJax
-    (the equations are KaTeX's LaTeX panes)."""
+    (the equations are KaTeX's LaTeX panes). page.adjust_panel leaves out the polyfill of Panel's
+    ESM components: no model of any tab is one."""
     from bokeh.document import Document
     from bokeh.embed.bundle import _use_gl, _use_mathjax
     from bokeh.embed.util import contains_tex_string
+    from panel.io.resources import Resources
+    from panel.models.esm import ReactiveESM
     from panel.models.markup import HTML
+
+    page.adjust_panel()
+    assert not [f for f in Resources(mode="server").js_files if "es-module-shims" in f]
 
     app = main.App()
     for f in FEATURES:
@@ -297,6 +303,7 @@ def test_no_model_of_any_tab_needs_the_bokehjs_bundles_the_page_leaves_out():
     models = set(doc.models)
     assert len(models) > 500 and not _use_gl(models) and not _use_mathjax(models)
     assert not [m for m in models if isinstance(m, HTML) and not m.disable_math and contains_tex_string(m.text)]
+    assert not [m for m in models if isinstance(m, ReactiveESM)]
     assert set(page.BOKEH_BUNDLES) == {"bokeh", "bokeh-widgets", "bokeh-tables"}
 
 
