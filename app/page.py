@@ -321,14 +321,6 @@ class Spares:
             cls.building.discard(key)
 
 
-def collected_when_idle():
-    """Panel's full garbage collection 5 s after a page's document is destroyed
-    (panel.io.document._garbage_collect), asked of memory.Collector instead, which runs it once the
-    server is idle. Panel ran it then whatever the server was doing: 134-294 ms in which no page was
-    answered, found by the loop's slow-callback log in the middle of a new page's load."""
-    Collector.request()
-
-
 def adjust_panel():
     """Panel's handling of the page's events, for this server process (once; each page runs main.py):
     a change is handled at once, not 50 ms later (Panel waits that long for more changes of the same
@@ -353,7 +345,13 @@ def adjust_panel():
     Syncable._debounce = 0
     if not getattr(Syncable._change_event, "cosymp", False):
         Syncable._change_event = in_one_message(Syncable._change_event)
-    document._garbage_collect = collected_when_idle
+    # A closed page's full garbage collection, which Panel runs 5 s after destroying its document
+    # whatever the server is then doing (134-294 ms in which no page was answered, found by the
+    # loop's slow-callback log in the middle of a new page's load), asked of memory.Collector
+    # instead, which runs it once the server is idle. A partial: Panel refuses to schedule a function
+    # of the app's own modules (it takes them for the page's script, cleared with its session), and
+    # a refusal there broke the closing session's destruction.
+    document._garbage_collect = functools.partial(Collector.request)
     if not getattr(document._dispatch_msgs, "cosymp", False):
         document._dispatch_msgs = no_stranded_messages(document._dispatch_msgs)
     if not getattr(WebSocketHandler.write_message, "cosymp", False):
