@@ -178,11 +178,15 @@ def test_panel_handles_a_change_at_once_and_sends_what_it_causes_in_one_message(
 def test_a_destroyed_documents_garbage_is_collected_when_the_server_is_idle(monkeypatch):
     """Panel schedules a full collection 5 s after destroying a page's document, run whatever the
     server is then doing; page.adjust_panel makes it a request to memory.Collector (which runs it
-    once the server is idle). Panel must still call it by its module's name for that to hold."""
+    once the server is idle). Panel must still call it by its module's name for that to hold, and
+    schedules nothing whose module is one of the served app's (`bokeh_app_...`, this app's modules
+    when served; `app....` here): such a callback raised in the middle of each session's destruction."""
     from panel.io import document
 
     page.adjust_panel()
     assert "state.schedule_task('gc.collect', _garbage_collect" in inspect.getsource(document._destroy_document)
+    assert "startswith('bokeh_app_')" in inspect.getsource(pn.state.schedule_task)
+    assert not getattr(document._garbage_collect, "__module__", "").startswith(("bokeh_app_", "app."))
     monkeypatch.setattr(memory.Collector, "requested", False)
     collected = []
     monkeypatch.setattr(memory.gc, "collect", lambda *args: collected.append(args))
