@@ -338,8 +338,8 @@ def adjust_panel():
     messages.install()
     graph.install()
     Resources._default_components = BOKEH_BUNDLES
-    # Nor the polyfill of Panel's ESM components (es-module-shims), which every page loaded although
-    # none of the app's components is one (tests/test_app_main.py checks): its script and what it did
+    # No polyfill of Panel's ESM components (es-module-shims) either: every page loaded it although
+    # none of the app's components is one (tests/test_app_main.py checks); its script and what it did
     # took 27 ms of the page's main thread before the first plot (CPU profiles, mean of four loads).
     ReactiveESM.__javascript_raw__ = []
     Syncable._debounce = 0
