@@ -1,8 +1,9 @@
 """The cosymp app: one page per browser session, composed from the registry of features.
 
 Serve it with `panel serve app --setup app/warmup.py` (app/warmup.py makes the compiled kernels
-ready first). Everything is served from this server: the Bootstrap template, KaTeX and
-BokehJS come from Panel's and Bokeh's bundled resources.
+ready first). Everything is served from this server: the Bootstrap template and BokehJS come from
+Panel's and Bokeh's bundled resources, KaTeX's stylesheet and fonts from app/static (the equations
+are typeset on the server: plotting.typeset).
 """
 import asyncio
 import contextlib
@@ -481,7 +482,7 @@ class App(param.Parameterized):
 
 adjust_panel()
 serve_locally()
-pn.extension("katex", notifications=True, design=Design, js_files=SCRIPTS,
+pn.extension(notifications=True, design=Design, js_files=SCRIPTS,
              global_css=[katex_fonts_css()])  # the page's head only: a shadow root's @font-face is ignored
 # Bottom right: at the bottom left they covered the sidebar's boxes a message asks to change (a typed
 # beta(t), x0 ...) and its Copy link and Download buttons; here they cover the lower corner of plots

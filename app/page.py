@@ -31,8 +31,7 @@ from .memory import Collector
 REBOOT = "app/static/bootstrap_reboot.css"  # Bootstrap's Reboot section, verbatim (see Design)
 # BokehJS and Panel's views adjusted in the page (served from app/static by the server; see each file).
 SCRIPTS = {"cosymp_bokeh_reads": "app/static/bokeh_reads.js", "cosymp_bokeh_layouts": "app/static/bokeh_layouts.js",
-           "cosymp_bokeh_sends": "app/static/bokeh_sends.js", "cosymp_bokeh_quiet": "app/static/bokeh_quiet.js",
-           "cosymp_panel_katex": "app/static/panel_katex.js"}
+           "cosymp_bokeh_sends": "app/static/bokeh_sends.js", "cosymp_bokeh_quiet": "app/static/bokeh_quiet.js"}
 
 
 class Design(Bootstrap):
@@ -80,9 +79,9 @@ def in_one_message(change_event):
 
 
 # The BokehJS bundles the page loads: not its WebGL or MathJax ones (2 MB of the page's 5.5, about
-# 100 ms of its first load), which no figure or text of the app uses (the equations are KaTeX's;
-# tests/test_app_main.py checks that no model of the page needs them). Panel's own bundle needs the
-# tables bundle.
+# 100 ms of its first load), which no figure or text of the app uses (the equations are KaTeX's,
+# typeset on the server; tests/test_app_main.py checks that no model of the page needs them).
+# Panel's own bundle needs the tables bundle.
 BOKEH_BUNDLES = ["bokeh", "bokeh-widgets", "bokeh-tables"]
 
 

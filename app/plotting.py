@@ -13,7 +13,7 @@ still hides B).
 import html
 import math
 import re
-from functools import cache
+from functools import cache, lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -431,21 +431,26 @@ def stylesheet():
 
 KATEX = Path(__file__).resolve().parent / "static" / "katex"
 KATEX_URL = "app/static/katex/"  # where the app's server serves KATEX, relative to the page
+# KaTeX's renderToString, the one call the server makes of it: inline math, an error shown as the
+# source in red (its message in the title) rather than raised, no command that loads or links.
+KATEX_CALL = """
+var console = {log() {}, warn() {}, error() {}};
+function typeset(tex) {
+  return katex.renderToString(tex, {displayMode: false, throwOnError: false, strict: "ignore", trust: false});
+}
+"""
 
 
 @cache
 def katex_css():
-    """KaTeX's own stylesheet (app/static/katex: the release Panel bundles, with its fonts), its font
-    URLs made relative to the page and woff2 only. Panel's LaTeX pane shows KaTeX's MathML and hides
-    its HTML, and Panel's bundled copy of this sheet names font files it does not ship: Chromium drew
-    the equations in a text font without math tables (primes became dots, fractions collapsed).
-    Panel inlines a local stylesheet, so URLs relative to the sheet's file would not resolve. The
-    font families are renamed (cosymp-KaTeX_Main, ...): with the bundled sheet's names, Chromium
-    also fetched the bundled faces while ours loaded (404s)."""
+    """KaTeX's own stylesheet (app/static/katex: the release whose script typesets, with its
+    fonts), its font URLs made relative to the page and woff2 only. Panel inlines a local
+    stylesheet, so URLs relative to the sheet's file would not resolve. The font families are
+    renamed (cosymp-KaTeX_Main, ...): with the sheet's names, Chromium also fetched the faces of
+    Panel's bundled copy (which names files it does not ship: 404s)."""
     css = re.sub(r"(?<![/A-Za-z])KaTeX_", "cosymp-KaTeX_", (KATEX / "katex.min.css").read_text())
-    css = re.sub(r'url\((fonts/[^)]+)\.woff2\) format\("woff2"\)(,url\([^)]*\) format\("[a-z]+"\))*',
-                 rf'url({KATEX_URL}\1.woff2) format("woff2")', css)
-    return css + "\n.katex span.katex-html { display: inline; }  /* Panel's katex.css hides it */\n"
+    return re.sub(r'url\((fonts/[^)]+)\.woff2\) format\("woff2"\)(,url\([^)]*\) format\("[a-z]+"\))*',
+                  rf'url({KATEX_URL}\1.woff2) format("woff2")', css)
 
 
 @cache
@@ -454,9 +459,38 @@ def katex_fonts_css():
     return "\n".join(re.findall(r"@font-face\{[^}]*\}", katex_css()))
 
 
+@cache
+def katex():
+    """KaTeX (app/static/katex/katex.min.js) in a QuickJS interpreter of its own, loaded once per
+    process (about 25 ms; app/warmup.py does it before the server starts). quickjs.Function runs
+    every call on one thread of its own, as QuickJS requires."""
+    import quickjs
+
+    render = quickjs.Function("typeset", (KATEX / "katex.min.js").read_text() + KATEX_CALL, own_executor=True)
+    render.set_time_limit(2)
+    render.set_memory_limit(64 << 20)
+    return render
+
+
+@lru_cache(maxsize=256)
+def typeset(tex):
+    """The HTML of inline math tex, typeset by KaTeX on the server (about 1 ms; the scenes'
+    equations come back with their scene). Pages then load no KaTeX script and typeset nothing:
+    the script (277 kB) and its typesetting took 40-60 ms of a first page's main thread. Text KaTeX
+    cannot typeset shows as its source in red; text that exhausts the interpreter (time or memory)
+    as plain text."""
+    import quickjs
+
+    try:
+        return katex()(tex, run_gc=False)
+    except quickjs.JSException:
+        return f"<code>{html.escape(tex)}</code>"
+
+
 def equation(tex, **kw):
-    """A LaTeX pane drawn by KaTeX with its own stylesheet and fonts."""
-    return pn.pane.LaTeX(tex, renderer="katex", stylesheets=[katex_css()], **kw)
+    """An HTML pane showing the math tex typeset (empty tex: nothing), with KaTeX's stylesheet (and
+    Panel's search for TeX to give MathJax off: the HTML is typeset already)."""
+    return pn.pane.HTML(typeset(tex) if tex else "", stylesheets=[katex_css()], disable_math=True, **kw)
 
 
 def note(obj, **kw):

@@ -32,7 +32,7 @@ from cosymp.study import carried_loop, loop_stride, with_reference
 from cosymp.study import compare_until_failure as study_until_failure
 
 from .jobs import Job, Note
-from .plotting import equation, note, push
+from .plotting import equation, note, push, typeset
 from .presets import HARD, PAPER, PRESETS, URL_NAMES, first_state, query_items, rounded
 from .warmup import first_view
 from .widgets import bound, empty
@@ -1092,7 +1092,7 @@ class SceneInfo(pn.viewable.Viewer):
         lines = self.study.scene_obj.shown_equations(vals)
         for i, pane_ in enumerate(self._equations):
             shown = i < len(lines)
-            pane_.param.update(object=f"${lines[i]}$" if shown else "", visible=shown)
+            pane_.param.update(object=typeset(lines[i]) if shown else "", visible=shown)
 
 
 class PresetLinks(pn.viewable.Viewer):

@@ -112,29 +112,46 @@ def test_the_quiet_shim_still_matches_bokehjs():
     assert '"models/plots/plot_canvas":' in js and '"models/ranges/data_range1d":' in js
 
 
-def test_the_equations_get_katexs_stylesheet_and_every_font_it_names():
-    """Panel's bundled KaTeX stylesheet names fonts it does not ship, and its LaTeX pane hides
-    KaTeX's HTML: the app serves the same KaTeX release's sheet and fonts (app/static/katex) and
-    gives the sheet to every equation, with each font's URL pointing at a file it serves."""
+def test_the_equations_are_typeset_on_the_server_with_katexs_stylesheet_and_every_font_it_names():
+    """plotting.typeset runs the KaTeX release whose stylesheet and fonts app/static/katex holds
+    (Panel's bundled sheet names fonts it does not ship), and every equation gets that sheet, each
+    font's URL pointing at a file the app serves. The page loads no KaTeX script."""
     import re
-    from pathlib import Path
 
-    import panel
+    from panel.io.resources import Resources
 
     from app import plotting
 
-    bundled = list((Path(panel.__file__).parent / "dist" / "bundled" / "katex").glob("katex@*/dist/katex.min.css"))
-    assert len(bundled) == 1 and bundled[0].parent.parent.name == "katex@" + re.search(
-        r"katex-version:after\{content:\"([0-9.]+)\"\}", (plotting.KATEX / "katex.min.css").read_text()).group(1), "another KaTeX release"
-    wanted = set(re.findall(r"url\(fonts/([^)]+\.woff2)\)", bundled[0].read_text()))
-    urls = re.findall(r"url\(([^)]+)\)", plotting.katex_fonts_css())
-    assert wanted and {u.rsplit("/", 1)[1] for u in urls} == wanted
-    assert all(u.startswith(plotting.KATEX_URL) and (plotting.KATEX / u.removeprefix(plotting.KATEX_URL)).is_file()
-               for u in re.findall(r"url\(([^)]+)\)", plotting.katex_css()))
-    assert plotting.katex_css() in plotting.equation("$q$").stylesheets
+    version = re.compile(r"katex-version:after\{content:\"([0-9.]+)\"\}|version:\"([0-9.]+)\"")
+    css_version = version.search((plotting.KATEX / "katex.min.css").read_text()).group(1)
+    assert css_version and css_version == version.search((plotting.KATEX / "katex.min.js").read_text()).group(2)
+    urls = re.findall(r"url\(([^)]+)\)", plotting.katex_css())
+    assert len(urls) > 10 and urls == re.findall(r"url\(([^)]+)\)", plotting.katex_fonts_css())
+    assert all(u.startswith(plotting.KATEX_URL) and u.endswith(".woff2")
+               and (plotting.KATEX / u.removeprefix(plotting.KATEX_URL)).is_file() for u in urls)
+    eq = plotting.equation(r"\dot q = p")
+    assert plotting.katex_css() in eq.stylesheets and eq.disable_math
+    assert 'class="katex-html"' in eq.object and '<annotation encoding="application/x-tex">\\dot q = p</annotation>' in eq.object
+    assert plotting.equation("").object == ""
     # The fonts are declared once, in the page's head (a shadow root's @font-face is ignored; as
     # raw_css they were copied into every component: half of the first page's document).
     assert plotting.katex_fonts_css() in pn.config.global_css and plotting.katex_fonts_css() not in pn.config.raw_css
+    assert not [f for f in Resources(mode="server").js_files if "katex" in f.lower()]
+
+
+def test_text_katex_cannot_typeset_shows_as_its_source_and_nothing_runs_or_links():
+    """An equation's TeX can hold what a user typed (beta(t)): an unparseable one shows as its
+    source in red with KaTeX's message, a macro that expands forever stops at KaTeX's limit, and
+    no command makes a link or runs script (KaTeX's trust is off)."""
+    from app import plotting
+
+    broken = plotting.typeset(r"\frac{1}{")
+    assert broken.startswith('<span class="katex-error"') and "ParseError" in broken and "color:#cc0000" in broken
+    assert "Too many expansions" in plotting.typeset(r"\def\a{\a}\a")
+    for tex in (r"\href{javascript:alert(1)}{x}", r"\url{https://example.com}", r"\htmlData{onclick=x}{y}",
+                "</span><script>alert(1)</script>"):
+        out = plotting.typeset(tex)
+        assert "<a " not in out and "<script" not in out and "onclick" not in out.replace("onclick=x", ""), tex
 
 
 def test_components_get_bootstraps_reboot_and_the_page_the_whole_of_bootstrap():
@@ -256,38 +273,10 @@ def test_the_layouts_shim_still_matches_bokehjs():
                      tabs[1], re.DOTALL), "Panel's Tabs lays out its tabs otherwise: revisit bokeh_layouts.js"
 
 
-def test_the_katex_shim_still_matches_panel():
-    """app/static/panel_katex.js typesets an equation pane's new text in its container, as Panel's
-    KaTeX view does when it renders (the container's HTML set to the text, then KaTeX's
-    auto-render with these delimiters), which Panel does on each change of the text; it hooks
-    BokehJS's register_models, through which Panel registers its models."""
-    import re
-    from pathlib import Path
-
-    import bokeh
-    import panel
-
-    panel_js = (Path(panel.__file__).parent / "dist" / "panel.js").read_text()
-    view = re.search(r"class KaTeXView extends [^\n]*\{((?:(?!\n    class ).)*)", panel_js, re.DOTALL)
-    assert view, "Panel's KaTeX pane changed: revisit app/static/panel_katex.js"
-    assert re.search(r"this\.on_change\(text, \(\) => this\.render\(\)\);", view[1])
-    assert re.search(r"render\(\) \{\s*super\.render\(\);\s*this\.container\.innerHTML = this\.model\.text;\s*"
-                     r"if \(!window\.renderMathInElement\) \{\s*return;\s*\}\s*window\.renderMathInElement\("
-                     r"this\.shadow_el, \{\s*delimiters: \[\s*"
-                     r"\{ left: \"\$\$\", right: \"\$\$\", display: true \},\s*"
-                     r"\{ left: \"\\\\\[\", right: \"\\\\\]\", display: true \},\s*"
-                     r"\{ left: \"\$\", right: \"\$\", display: false \},\s*"
-                     r"\{ left: \"\\\\\(\", right: \"\\\\\)\", display: false \},\s*\],\s*\}\);", view[1]), \
-        "Panel's KaTeX pane renders otherwise: revisit app/static/panel_katex.js"
-    assert re.search(r"\(0, base_1\.register_models\)\(Panel\)", panel_js)
-    js = (Path(bokeh.__file__).parent / "server" / "static" / "js" / "bokeh.js").read_text()
-    assert '"base":' in js and re.search(r"function register_models\(models, force = false\)", js)
-
-
 def test_no_model_of_any_tab_needs_the_scripts_the_page_leaves_out():
     """app/page.BOKEH_BUNDLES leaves out BokehJS's WebGL and MathJax bundles: no figure of any tab
     draws with WebGL, no text is MathText and no HTML model holds TeX that Panel would give MathJax
-    (the equations are KaTeX's LaTeX panes). page.adjust_panel leaves out the polyfill of Panel's
+    (the equations are HTML typeset by KaTeX on the server). page.adjust_panel leaves out the polyfill of Panel's
     ESM components: no model of any tab is one."""
     from bokeh.document import Document
     from bokeh.embed.bundle import _use_gl, _use_mathjax

@@ -17,7 +17,7 @@ from app.page import Design
 from app.study import Study
 
 messages.install()
-pn.extension("katex", design=Design)
+pn.extension(design=Design)
 
 
 def plain(x):

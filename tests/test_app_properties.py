@@ -137,7 +137,7 @@ from bokeh.document import Document
 from app.page import Design
 from app.study import Study
 from app.features import FEATURES
-pn.extension("katex", design=Design)
+pn.extension(design=Design)
 study = Study()
 doc = Document()
 for f in FEATURES:

@@ -169,7 +169,7 @@ class GaugeView(FeatureView):
         # magnitude below the per-gauge differences (on an axis of its own it filled the plot).
         differences[1].y_range = differences[0].y_range
         rows = [pn.Row(note(f"<b>{name}</b>", width=90, sizing_mode=None),
-                       equation(f"$\\chi = {x.chi}$", width=230),
+                       equation(f"\\chi = {x.chi}", width=230),
                        note(f"<span class='doc'>condition: {html.escape(x.condition)}</span>"
                             + (f"<br><span class='caveat'>{html.escape(x.caveat)}</span>" if x.caveat else "")),
                        sizing_mode="stretch_width")
