@@ -25,6 +25,7 @@ import time
 
 import param
 
+from cosymp import warm
 from cosymp.errors import InputError, RunError
 
 from . import memory
@@ -185,7 +186,7 @@ class Job(param.Parameterized):
         self._wanted += 1
         if self.running or self._closed:
             return
-        quick = self.quick()
+        quick = not warm.compiling() and self.quick()
         wait = self._last_quick + QUICK_GAP_S - time.perf_counter()
         if quick and wait <= 0:
             self._last_quick = time.perf_counter()
@@ -271,13 +272,20 @@ class Job(param.Parameterized):
             self.run.result = None
 
     def refresh(self):
-        """Compute from the current inputs now, in this thread (a page's first results)."""
+        """Compute from the current inputs now, in this thread (a page's first results). While the
+        server still compiles kernels (a cold cache), the inputs are checked and the memory leased
+        now, and the computation runs in its thread: one that waited here for its kernels held the
+        whole server (every page, even /liveness) for minutes."""
         self._wanted += 1
         self._now()
 
     def _now(self):
         target = self._wanted
         run = self._begin()
+        if run is not None and warm.compiling():
+            self.running = True
+            param.parameterized.async_executor(functools.partial(self._drain, begun=(run, target)))
+            return
         if run is not None:
             run._main()
             self._end(run)
@@ -289,8 +297,13 @@ class Job(param.Parameterized):
 
     # ---- the loop side
 
-    async def _drain(self, wait=0.0):
+    async def _drain(self, wait=0.0, begun=None):
         try:
+            if begun is not None:  # a run begun in the handler (`_now`), and the request it meets
+                run, target = begun
+                await run.wait(self._on_progress, self._on_partial, self.partial_interval)
+                self._end(run)
+                self._done = max(self._done, target)
             if wait > 0:  # quick results came moments ago: changes made meanwhile are merged into one
                 await asyncio.sleep(wait)
             while self._done < self._wanted and not self._closed:

@@ -576,7 +576,7 @@ class Study(Job):
         self.param.watch(self._on_change, list(self.INPUTS))
         self.param.watch(self._on_view, "view")
         self.refresh()
-        if self.results is None:  # refused (a link's h or T, say): the scene's own run instead
+        if self.results is None and not self.running:  # refused (a link's h or T, say): the scene's own run instead
             h, T, values = (scene.h, scene.T, {}) if chosen else (FIRST_VIEW["h"], FIRST_VIEW["T"], FIRST_VIEW["values"])
             self._set({"h": h, "T": T, "values": dict(values), "method": FIRST_VIEW["method"],
                        "other": FIRST_VIEW["other"]})

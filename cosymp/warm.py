@@ -307,6 +307,11 @@ def start(first=(), processes=None, report=None):
     return None if _background.total == 0 else _background
 
 
+def compiling():
+    """Whether a background compiler is still at work: a run may then wait minutes (ensure)."""
+    return _background is not None and not _background.finished
+
+
 def ensure(setup):
     """Wait for the unit of this setup while a background compiler has it (a no-op otherwise)."""
     if _background is not None and not _background.finished:

@@ -962,6 +962,50 @@ def test_under_a_running_loop_the_runs_come_first_and_their_reference_follows_wh
     asyncio.run(scenario())
 
 
+def test_while_kernels_compile_a_pages_first_results_come_from_their_thread_and_the_loop_goes_on(monkeypatch):
+    """On a cold cache the server compiles kernels in the background and a run waits for its own
+    (cosymp.warm.ensure): minutes for the charged scene's. A page's first results, asked for while
+    its session is built on the server's loop, are then computed in their thread, so the loop
+    serves every other page meanwhile (it did not: one page at ?scene=charged held the whole
+    server), and they are shown when the kernels come. With no compiler at work they are computed
+    in the handler, in the page's first message, as before."""
+    from cosymp import warm
+
+    kernels = threading.Event()
+    monkeypatch.setattr(warm, "compiling", lambda: not kernels.is_set())
+    real = study.run_pair
+
+    def held(*args, **kwargs):  # waits for its kernels, as ensure does
+        assert kernels.wait(10)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(study, "run_pair", held)
+
+    async def scenario():
+        ticks = []
+
+        async def tick():
+            while True:
+                ticks.append(None)
+                await asyncio.sleep(0.005)
+
+        ticker = asyncio.ensure_future(tick())
+        s = Study(scene="charged")
+        assert s.results is None and s.running and s.scene == "charged"
+        await until(lambda: len(ticks) >= 10)
+        assert s.results is None, "the loop went on while the run waited for its kernels"
+        kernels.set()
+        await until(lambda: s.results is not None and not s.running)
+        assert s.results.scene == "charged" and s.results.T == SCENES["charged"].T and s.message is None
+        now = Study(scene="damped")
+        assert now.results is not None and not now.running and now.results.scene == "damped"
+        ticker.cancel()
+        s.release()
+        now.release()
+
+    asyncio.run(scenario())
+
+
 def test_a_late_reference_that_fails_or_is_refused_says_why_under_the_plots(monkeypatch):
     """beta(t) = exp(t): the reference overflows, as a live one does, with the same words; a
     reference the memory cap refuses leaves the runs without errors, and says so."""
