@@ -349,8 +349,11 @@ def adjust_panel():
     # loop's slow-callback log in the middle of a new page's load), asked of memory.Collector
     # instead, which runs it once the server is idle. A partial: Panel refuses to schedule a function
     # of the app's own modules (it takes them for the page's script, cleared with its session), and
-    # a refusal there broke the closing session's destruction.
-    document._garbage_collect = functools.partial(Collector.request)
+    # a refusal there broke the closing session's destruction. One partial for the process: Panel
+    # warns (twice in the log) when a page closes within 5 s of another unless it is given the same
+    # callback it already scheduled.
+    if getattr(document._garbage_collect, "func", None) != Collector.request:
+        document._garbage_collect = functools.partial(Collector.request)
     if not getattr(document._dispatch_msgs, "cosymp", False):
         document._dispatch_msgs = no_stranded_messages(document._dispatch_msgs)
     if not getattr(WebSocketHandler.write_message, "cosymp", False):

@@ -204,6 +204,9 @@ def test_a_destroyed_documents_garbage_is_collected_when_the_server_is_idle(monk
     assert "state.schedule_task('gc.collect', _garbage_collect" in inspect.getsource(document._destroy_document)
     assert "startswith('bokeh_app_')" in inspect.getsource(pn.state.schedule_task)
     assert not getattr(document._garbage_collect, "__module__", "").startswith(("bokeh_app_", "app."))
+    scheduled = document._garbage_collect
+    page.adjust_panel()  # another page: the callback Panel already scheduled, or it warns
+    assert document._garbage_collect is scheduled
     monkeypatch.setattr(memory.Collector, "requested", False)
     collected = []
     monkeypatch.setattr(memory.gc, "collect", lambda *args: collected.append(args))
