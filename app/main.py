@@ -133,6 +133,8 @@ class App(param.Parameterized):
         self.study.param.watch(self._on_message, "message")
         self.study.param.watch(self._on_running, "running")
         self._waiting = None  # the notice of a comparison that runs long
+        if self.study.running and self._served():  # its first results in their thread: kernels compiling (Job.refresh)
+            self._doc.add_timeout_callback(self._still_running, WAITING_MS)
         self.study.param.watch(lambda e: self._write_url(), "results")
         for f in FEATURES:
             if f.url:
@@ -187,9 +189,14 @@ class App(param.Parameterized):
         self._show(event.new)
         self._write_url()
 
+    # What _stop calls, bound here: a session whose page never connected (a link fetched, not
+    # opened) is destroyed after Bokeh has emptied this module's namespace (the page's script), and
+    # _stop then failed on the name Collector (a warning in the log for each such session).
+    _collect = Collector.request
+
     def _stop(self, session_context):
         """A closed page stops its background runs and gives back the memory of its results; nothing
-        is drawn or notified for it any more."""
+        is drawn or notified for it any more. Reads nothing of this module's namespace (see _collect)."""
         if self._stopped:
             return
         self._stopped = True
@@ -197,7 +204,7 @@ class App(param.Parameterized):
             if state is not None:
                 state.release()
         self.study.release()
-        Collector.request()
+        self._collect()
 
     def _on_running(self, event):
         """A comparison in its thread (a quick one runs in the change's handler) that is still running
