@@ -19,6 +19,7 @@ from urllib.parse import urlencode
 import panel as pn
 import param
 
+from cosymp import warm
 from cosymp.diagnostics import loop_action
 from cosymp.errors import InputError, RunError
 from cosymp.integrate import Setup, check_step, default_stride
@@ -334,12 +335,17 @@ def measured(runs, reference, stopped=""):
 
 def waiting_text(study):
     """What a comparison that runs long computes, while the plots show the last results ('' for
-    inputs it will refuse). No time is guessed: this server's rate per step (SECONDS_PER_STEP), noted
-    from shorter runs, holds their fixed costs (kapitza at T = 2000 was said to take 16 s, and took 8)."""
+    inputs it will refuse), or what it waits for while the server compiles kernels (a cold cache).
+    No time is guessed: this server's rate per step (SECONDS_PER_STEP), noted from shorter runs,
+    holds their fixed costs (kapitza at T = 2000 was said to take 16 s, and took 8)."""
     try:
         steps = check_step(study.h, study.T)
     except InputError:
         return ""
+    if warm.compiling():
+        return (f"Computing h = {study.h:g} to T = {study.T:g} ({steps:,} steps) once this scene's kernels are "
+                "compiled: the server's first start compiles them in the background and serves other pages "
+                "meanwhile.")
     return f"Computing h = {study.h:g} to T = {study.T:g} ({steps:,} steps): the plots show the last results until then."
 
 

@@ -993,6 +993,7 @@ def test_while_kernels_compile_a_pages_first_results_come_from_their_thread_and_
         ticker = asyncio.ensure_future(tick())
         s = Study(scene="charged")
         assert s.results is None and s.running and s.scene == "charged"
+        assert "once this scene's kernels are compiled" in study.waiting_text(s)
         await until(lambda: len(ticks) >= 10)
         assert s.results is None, "the loop went on while the run waited for its kernels"
         kernels.set()
