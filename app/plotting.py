@@ -462,8 +462,8 @@ def katex_fonts_css():
 @cache
 def katex():
     """KaTeX (app/static/katex/katex.min.js) in a QuickJS interpreter of its own, loaded once per
-    process (about 25 ms; app/warmup.py does it before the server starts). quickjs.Function runs
-    every call on one thread of its own, as QuickJS requires."""
+    process, by the server's first session (25-40 ms). quickjs.Function runs every call on one
+    thread of its own, as QuickJS requires; a call stops after 2 s or 64 MB."""
     import quickjs
 
     render = quickjs.Function("typeset", (KATEX / "katex.min.js").read_text() + KATEX_CALL, own_executor=True)
