@@ -314,7 +314,7 @@ def compiling():
 
 def ensure(setup):
     """Wait for the unit of this setup while a background compiler has it (a no-op otherwise)."""
-    if _background is not None and not _background.finished:
+    if compiling():
         _background.wait([key_of(setup)])
 
 
