@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import panel as pn
+import quickjs
 from bokeh.models import (
     ColumnDataSource,
     CustomJS,
@@ -464,8 +465,6 @@ def katex():
     """KaTeX (app/static/katex/katex.min.js) in a QuickJS interpreter of its own, loaded once per
     process, by the server's first session (25-40 ms). quickjs.Function runs every call on one
     thread of its own, as QuickJS requires; a call stops after 2 s or 64 MB."""
-    import quickjs
-
     render = quickjs.Function("typeset", (KATEX / "katex.min.js").read_text() + KATEX_CALL, own_executor=True)
     render.set_time_limit(2)
     render.set_memory_limit(64 << 20)
@@ -479,8 +478,6 @@ def typeset(tex):
     the script (277 kB) and its typesetting took 40-60 ms of a first page's main thread. Text KaTeX
     cannot typeset shows as its source in red; text that exhausts the interpreter (time or memory)
     as plain text."""
-    import quickjs
-
     try:
         return katex()(tex, run_gc=False)
     except quickjs.JSException:
