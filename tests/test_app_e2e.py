@@ -642,6 +642,7 @@ def test_a_scene_change_shows_its_equations_typeset_on_the_server(page):
         shown = page.page.evaluate(EQUATIONS_JS)
         assert shown["tex"] == list(SCENES[name].equations), name
         assert shown["kept"] == shown["seen"] >= len(SCENES["damped"].equations), (name, shown)
+    assert shown["seen"] == len(SCENES["charged"].equations), "every pane of the last scene was seen before and kept"
     page.shot("equations-charged")
     page.check()
 
